@@ -1,0 +1,208 @@
+"""The one estimator face every hysteresis model family wears (scikit-learn style).
+
+* ``__init__`` only stores hyper-parameters (keyword arguments, same names as attributes);
+* ``fit(u, y)`` identifies the model and sets trailing-underscore attributes;
+* ``predict(u, *, state=None)`` simulates from the rest state (or a given state);
+* ``invert(y_desired, *, state=None)`` returns an input that makes the model produce ``y``;
+* ``score(u, y)`` is the coefficient of determination R^2 (higher is better, as in sklearn);
+* ``get_params``/``set_params`` so Hydra can ``instantiate`` and sweep it;
+* ``to_json``/``from_json`` are lossless (floats are written with ``repr`` precision).
+
+Families register themselves by name with :func:`register_family` so that
+``conf/family/<name>.yaml`` and :func:`make_family` find them.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+M = TypeVar("M", bound="HysteresisModel")
+
+_REGISTRY: dict[str, type[HysteresisModel]] = {}
+
+
+class HysteresisError(Exception):
+    """The one error class of :mod:`hysteresis` (bad input arrays, unfitted model, ...)."""
+
+
+class NotFittedError(HysteresisError):
+    """``predict``/``invert`` called before ``fit``."""
+
+
+def register_family(name: str) -> Any:
+    """Class decorator: register a family under ``name`` (``gamma``, ``bouc_wen``, ...)."""
+
+    def deco(cls: type[M]) -> type[M]:
+        if name in _REGISTRY and _REGISTRY[name] is not cls:
+            raise HysteresisError(f"family {name!r} is registered twice")
+        cls.family = name
+        _REGISTRY[name] = cls
+        return cls
+
+    return deco
+
+
+def family_names() -> list[str]:
+    """Registered family names, sorted."""
+    _import_all_families()
+    return sorted(_REGISTRY)
+
+
+def family_class(name: str) -> type[HysteresisModel]:
+    _import_all_families()
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise HysteresisError(
+            f"unknown model family {name!r}; known: {', '.join(sorted(_REGISTRY))}"
+        ) from None
+
+
+def make_family(name: str, **params: Any) -> HysteresisModel:
+    """Instantiate family ``name`` with hyper-parameters ``params``."""
+    return family_class(name)(**params)
+
+
+def _import_all_families() -> None:
+    # Importing the package registers every family module it lists.
+    import hysteresis  # noqa: F401
+
+
+def as_1d(x: Any, name: str) -> FloatArray:
+    """Validate and convert an input signal to a finite 1-D float64 array."""
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.ndim != 1:
+        raise HysteresisError(f"{name} must be 1-D, got shape {arr.shape}")
+    if arr.size == 0:
+        raise HysteresisError(f"{name} is empty")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.flatnonzero(~np.isfinite(arr))[0])
+        raise HysteresisError(f"{name} has a non-finite value at index {bad}")
+    return arr
+
+
+def check_pair(u: Any, y: Any) -> tuple[FloatArray, FloatArray]:
+    uu, yy = as_1d(u, "u"), as_1d(y, "y")
+    if uu.shape != yy.shape:
+        raise HysteresisError(f"u and y differ in length: {uu.size} vs {yy.size}")
+    return uu, yy
+
+
+class HysteresisModel:
+    """Base class. Subclasses implement ``fit``, ``predict`` and (where they can) ``invert``."""
+
+    family: ClassVar[str] = "base"
+
+    # -- scikit-learn parameter protocol -------------------------------------------------
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        sig = inspect.signature(cls.__init__)
+        return [
+            p.name
+            for p in sig.parameters.values()
+            if p.name != "self" and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
+        ]
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        return {name: getattr(self, name) for name in self._param_names()}
+
+    def set_params(self: M, **params: Any) -> M:
+        valid = set(self._param_names())
+        for key, value in params.items():
+            if key not in valid:
+                raise HysteresisError(
+                    f"{type(self).__name__} has no hyper-parameter {key!r}; valid: {sorted(valid)}"
+                )
+            setattr(self, key, value)
+        return self
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        return f"{type(self).__name__}({args})"
+
+    # -- fitted state -----------------------------------------------------------------
+    def fitted_attributes(self) -> dict[str, Any]:
+        """Public attributes ending in ``_`` (set by ``fit``)."""
+        return {
+            k: v
+            for k, v in vars(self).items()
+            if k.endswith("_") and not k.startswith("_")
+        }
+
+    @property
+    def is_fitted(self) -> bool:
+        return bool(self.fitted_attributes())
+
+    def check_fitted(self) -> None:
+        if not self.is_fitted:
+            raise NotFittedError(f"{type(self).__name__} is not fitted yet; call fit(u, y) first")
+
+    # -- the estimator face -----------------------------------------------------------
+    def fit(self: M, u: Any, y: Any, **fit_params: Any) -> M:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def predict(self, u: Any, *, state: Any = None) -> FloatArray:  # pragma: no cover
+        raise NotImplementedError
+
+    def invert(self, y_desired: Any, *, state: Any = None) -> FloatArray:
+        raise HysteresisError(f"family {self.family!r} has no inverse")
+
+    def score(self, u: Any, y: Any) -> float:
+        """Coefficient of determination R^2 of ``predict(u)`` against ``y``."""
+        uu, yy = check_pair(u, y)
+        resid = yy - self.predict(uu)
+        ss_tot = float(np.sum((yy - yy.mean()) ** 2))
+        return 1.0 - float(np.sum(resid**2)) / ss_tot if ss_tot > 0 else float("nan")
+
+    # -- lossless JSON ----------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "family": self.family,
+            "class": f"{type(self).__module__}.{type(self).__qualname__}",
+            "params": _encode(self.get_params()),
+            "fitted": _encode(self.fitted_attributes()),
+        }
+
+    def to_json(self, *, indent: int | None = 1) -> str:
+        return json.dumps(self.to_dict(), indent=indent, allow_nan=True)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> HysteresisModel:
+        target = family_class(data["family"]) if cls is HysteresisModel else cls
+        model = target(**_decode(data["params"]))
+        for key, value in _decode(data["fitted"]).items():
+            setattr(model, key, value)
+        return model
+
+    @classmethod
+    def from_json(cls, text: str) -> HysteresisModel:
+        return cls.from_dict(json.loads(text))
+
+
+def _encode(obj: Any) -> Any:
+    """JSON-able form that round-trips numpy arrays (dtype and shape) exactly."""
+    if isinstance(obj, np.ndarray):
+        return {"__ndarray__": obj.tolist(), "dtype": str(obj.dtype), "shape": list(obj.shape)}
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, dict):
+        return {str(k): _encode(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_encode(v) for v in obj]
+    return obj
+
+
+def _decode(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        if "__ndarray__" in obj:
+            return np.asarray(obj["__ndarray__"], dtype=obj["dtype"]).reshape(obj["shape"])
+        return {k: _decode(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_decode(v) for v in obj]
+    return obj
