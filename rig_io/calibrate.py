@@ -1,0 +1,160 @@
+"""Calibration: raw rig values to physical units (rig-log-format.md section 1 and 2).
+
+The common in-memory form after calibration is :class:`PhysicalRun`: the manifest plus one
+table per stream in the manifest's units (encoder ``unit``, newtons, the camera quantity's
+unit). Run folders reach it through :func:`calibrate_raw_run`; bags (values in SI units) through
+:func:`from_si`; importers build it directly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from rig_io.errors import RigIOError
+from rig_io.run import RawRun
+
+#: Columns of the calibrated streams.
+PHYS_ENCODER = ("t_ns", "input", "output")
+PHYS_LOADCELL = ("t_ns", "tension_in_n", "tension_out_n")
+PHYS_VISION = ("t_ns", "frame", "value", "confidence")
+
+
+@dataclass
+class PhysicalRun:
+    """A run in physical units; ``output`` is NaN where the rig has no output encoder."""
+
+    manifest: dict[str, Any]
+    encoder: pd.DataFrame
+    loadcell: pd.DataFrame | None = None
+    camera: pd.DataFrame | None = None
+    tracker: pd.DataFrame | None = None
+    events: pd.DataFrame | None = None
+    #: File that held each stream (for error messages).
+    files: dict[str, str] = field(default_factory=dict)
+    #: Extra per-sample columns on the encoder time base (importers: e.g. a tension proxy).
+    extra: dict[str, npt.NDArray[np.float64]] = field(default_factory=dict)
+
+    @property
+    def run_id(self) -> str:
+        return str(self.manifest["run_id"])
+
+    def file(self, stream: str) -> str:
+        return self.files.get(stream, stream)
+
+
+def unwrap_counts(counts: npt.ArrayLike, bits: int) -> npt.NDArray[np.int64]:
+    """Unwrap a ``bits``-bit up/down counter: counts relative to the first sample.
+
+    Consecutive differences are folded into [-2**(bits-1), 2**(bits-1)), which is exact as
+    long as the counter moves less than half its range between two samples.
+    """
+    c = np.asarray(counts, dtype=np.int64)
+    if c.size == 0:
+        return c
+    modulus = np.int64(1) << np.int64(bits)
+    half = modulus >> np.int64(1)
+    d = np.diff(c)
+    d = (d + half) % modulus - half
+    out = np.empty_like(c)
+    out[0] = 0
+    np.cumsum(d, out=out[1:])
+    return out
+
+
+def counts_to_units(counts: npt.ArrayLike, *, counts_per_unit: float, bits: int,
+                    sign: int) -> npt.NDArray[np.float64]:
+    """Position in the encoder's unit: sign x unwrapped counts / counts_per_unit."""
+    return float(sign) * unwrap_counts(counts, bits).astype(float) / float(counts_per_unit)
+
+
+def mv_per_v_to_newton(raw: npt.ArrayLike, *, zero_mv_per_v: float,
+                       newton_per_mv_per_v: float) -> npt.NDArray[np.float64]:
+    """Bridge output in mV/V to force in N: (raw - zero) x gain."""
+    return (np.asarray(raw, dtype=float) - float(zero_mv_per_v)) * float(newton_per_mv_per_v)
+
+
+def newton_to_mv_per_v(force: npt.ArrayLike, *, zero_mv_per_v: float,
+                       newton_per_mv_per_v: float) -> npt.NDArray[np.float64]:
+    """Inverse of :func:`mv_per_v_to_newton` (the virtual rig and the bag round trip)."""
+    return np.asarray(force, dtype=float) / float(newton_per_mv_per_v) + float(zero_mv_per_v)
+
+
+# ------------------------------------------------------------------------------ SI <-> units
+
+_TO_SI = {"mm": 1e-3, "m": 1.0, "deg": math.pi / 180.0, "rad": 1.0}
+
+
+def si_factor(unit: str, *, run: str | None = None, file: str | None = None) -> float:
+    """Multiply a value in ``unit`` by this to get SI (m or rad)."""
+    try:
+        return _TO_SI[unit]
+    except KeyError:
+        raise RigIOError(f"unknown unit {unit!r} (known: {', '.join(_TO_SI)})",
+                         run=run, file=file) from None
+
+
+def encoder_unit(manifest: dict[str, Any]) -> str:
+    """The encoder's unit (``mm`` when a bag's manifest does not say)."""
+    enc = manifest.get("channels", {}).get("encoder") or {}
+    return str(enc.get("unit", "mm"))
+
+
+def vision_unit(manifest: dict[str, Any], stream: str) -> str:
+    """Unit of a camera/tracker ``quantity``: ``tip_angle_deg`` -> deg, ``output_mm`` -> mm."""
+    ch = manifest.get("channels", {}).get(stream) or {}
+    quantity = str(ch.get("quantity", "tip_angle_deg"))
+    return "deg" if quantity.endswith("_deg") else "mm" if quantity.endswith("_mm") else "mm"
+
+
+# ------------------------------------------------------------------------------- raw -> phys
+
+def calibrate_raw_run(run: RawRun, *, files: dict[str, str] | None = None) -> PhysicalRun:
+    """Counts to units (sign, wrap-around unwrapped), mV/V to newtons."""
+    m = run.manifest
+    enc = m["channels"]["encoder"]
+    bits, cpu = int(enc["counter_bits"]), float(enc["counts_per_unit"])
+    t = run.encoder["t_ns"].to_numpy(dtype=np.int64)
+    inp = counts_to_units(run.encoder["input_counts"].to_numpy(dtype=np.int64),
+                          counts_per_unit=cpu, bits=bits, sign=int(enc["input_sign"]))
+    out_raw = run.encoder["output_counts"]
+    if out_raw.isna().all():
+        out = np.full(t.size, np.nan)
+    else:
+        out = counts_to_units(out_raw.to_numpy(dtype=np.int64), counts_per_unit=cpu,
+                              bits=bits, sign=int(enc["output_sign"]))
+    encoder = pd.DataFrame({"t_ns": t, "input": inp, "output": out})
+    loadcell = None
+    if run.loadcell is not None:
+        cells = m["channels"]["loadcell"]
+        loadcell = pd.DataFrame({
+            "t_ns": run.loadcell["t_ns"].to_numpy(dtype=np.int64),
+            "tension_in_n": mv_per_v_to_newton(
+                run.loadcell["input_mv_per_v"],
+                zero_mv_per_v=cells["input"]["zero_mv_per_v"],
+                newton_per_mv_per_v=cells["input"]["newton_per_mv_per_v"]),
+            "tension_out_n": mv_per_v_to_newton(
+                run.loadcell["output_mv_per_v"],
+                zero_mv_per_v=cells["output"]["zero_mv_per_v"],
+                newton_per_mv_per_v=cells["output"]["newton_per_mv_per_v"]),
+        })
+    return PhysicalRun(manifest=m, encoder=encoder, loadcell=loadcell,
+                       camera=_vision(run.camera), tracker=_vision(run.tracker),
+                       events=run.events, files=dict(files or {}))
+
+
+def _vision(frame: pd.DataFrame | None) -> pd.DataFrame | None:
+    if frame is None:
+        return None
+    return pd.DataFrame({
+        "t_ns": frame["t_ns"].to_numpy(dtype=np.int64),
+        "frame": frame["frame"].to_numpy(dtype=np.int64),
+        "value": pd.to_numeric(frame["value"]).to_numpy(dtype=float, na_value=np.nan),
+        "confidence": pd.to_numeric(frame["confidence"]).to_numpy(dtype=float,
+                                                                  na_value=np.nan),
+    })

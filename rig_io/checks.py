@@ -1,0 +1,112 @@
+"""Semantic checks of one run that apply whatever container it came in (folder or bag).
+
+Structural problems (unreadable files, missing columns, non-numeric cells) are found by the
+readers; these functions look at values: timestamps, gaps, load-cell saturation, e-stops and
+camera confidence (rig-log-format.md section 3). Each raises :class:`RigIOError` naming the run,
+the file and the row (1-based line in the file, header = line 1) or the time.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from rig_io.calibrate import PhysicalRun
+from rig_io.errors import RigIOError
+
+#: A gap longer than this many median sample periods rejects the run (format section 3).
+MAX_GAP_PERIODS = 10.0
+#: Row of the first data line in a CSV file (line 1 is the header).
+FIRST_DATA_LINE = 2
+
+
+def _row(i: int, rows: bool) -> int | None:
+    return i + FIRST_DATA_LINE if rows else None
+
+
+def check_timestamps(t_ns: npt.NDArray[np.int64], *, run: str, file: str,
+                     check_gaps: bool = True, rows: bool = True) -> None:
+    """Timestamps strictly increase and have no gap longer than 10 sample periods."""
+    if t_ns.size == 0:
+        raise RigIOError("no samples", run=run, file=file)
+    dt = np.diff(t_ns)
+    bad = np.flatnonzero(dt <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        what = "repeats" if dt[bad[0]] == 0 else "goes backwards"
+        raise RigIOError(f"timestamp {what} (previous sample at t={int(t_ns[i - 1])} ns)",
+                         run=run, file=file, row=_row(i, rows), t_ns=int(t_ns[i]))
+    if check_gaps and dt.size >= 2:
+        period = float(np.median(dt))
+        gaps = np.flatnonzero(dt > MAX_GAP_PERIODS * period)
+        if gaps.size:
+            i = int(gaps[0])
+            raise RigIOError(
+                f"gap of {dt[i] / 1e6:.1f} ms after this sample is longer than "
+                f"{MAX_GAP_PERIODS:g} sample periods ({period / 1e6:.2f} ms)",
+                run=run, file=file, row=_row(i, rows), t_ns=int(t_ns[i]))
+
+
+def check_saturation(t_ns: npt.NDArray[np.int64], force_n: npt.NDArray[np.float64], *,
+                     range_n: float | None, side: str, run: str, file: str,
+                     rows: bool = True) -> None:
+    """A load cell reading at or beyond its range is saturated and rejects the run."""
+    if range_n is None:
+        return
+    sat = np.flatnonzero(np.abs(force_n) >= float(range_n))
+    if sat.size:
+        i = int(sat[0])
+        raise RigIOError(
+            f"{side} load cell saturated: {force_n[i]:.3f} N is at or beyond its range "
+            f"{float(range_n):g} N ({sat.size} saturated samples)",
+            run=run, file=file, row=_row(i, rows), t_ns=int(t_ns[i]))
+
+
+def check_events(events: pd.DataFrame | None, *, run: str, file: str,
+                 rows: bool = True) -> None:
+    """An ``estop`` event makes the data after it invalid: the run is rejected."""
+    if events is None or events.empty:
+        return
+    kinds = events["event"].astype(str).to_numpy()
+    hits = np.flatnonzero(kinds == "estop")
+    if hits.size:
+        i = int(hits[0])
+        detail = events["detail"].iloc[i]
+        extra = f" ({detail})" if isinstance(detail, str) and detail else ""
+        raise RigIOError(f"emergency stop (estop event){extra}: data after it is not valid",
+                         run=run, file=file, row=_row(i, rows),
+                         t_ns=int(events["t_ns"].iloc[i]))
+
+
+def check_confident(frame: pd.DataFrame, *, run: str, file: str) -> None:
+    """A camera or tracker stream needs at least one confident, measured frame."""
+    value = pd.to_numeric(frame["value"], errors="coerce").to_numpy(dtype=float)
+    conf = pd.to_numeric(frame["confidence"], errors="coerce").to_numpy(dtype=float)
+    ok = np.isfinite(value) & np.isfinite(conf) & (conf > 0)
+    if not ok.any():
+        raise RigIOError(f"no confident frame among {len(frame)} frames "
+                         "(every frame has confidence 0 or no value)", run=run, file=file)
+
+
+def check_physical_run(run: PhysicalRun, *, rows: bool = False) -> None:
+    """The value checks on a calibrated run (bags and importers; rows are not lines there)."""
+    run_id = run.run_id
+    for name in ("encoder", "loadcell", "camera", "tracker", "events"):
+        frame = getattr(run, name)
+        if frame is not None:
+            check_timestamps(frame["t_ns"].to_numpy(dtype=np.int64), run=run_id,
+                             file=run.file(name), check_gaps=name != "events", rows=rows)
+    if run.loadcell is not None:
+        cells = run.manifest.get("channels", {}).get("loadcell") or {}
+        t = run.loadcell["t_ns"].to_numpy(dtype=np.int64)
+        for side, col in (("input", "tension_in_n"), ("output", "tension_out_n")):
+            cell = cells.get(side) or {}
+            check_saturation(t, run.loadcell[col].to_numpy(dtype=float),
+                             range_n=cell.get("range_n"), side=side, run=run_id,
+                             file=run.file("loadcell"), rows=rows)
+    check_events(run.events, run=run_id, file=run.file("events"), rows=rows)
+    for name in ("camera", "tracker"):
+        frame = getattr(run, name)
+        if frame is not None:
+            check_confident(frame, run=run_id, file=run.file(name))

@@ -1,0 +1,137 @@
+"""ROS bags: round trip against the calibrated run folder, and the bag bad-input cases."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
+from rosbags.typesys import Stores, get_typestore
+
+from rig_io.bag import read_bag, sidecar_manifest, write_bag
+from rig_io.calibrate import calibrate_raw_run
+from rig_io.errors import RigIOError
+from rig_io.synthetic import make_raw_run
+
+STORAGES = ["rosbag1", "sqlite3", "mcap"]
+
+
+def _name(storage: str) -> str:
+    return "run.bag" if storage == "rosbag1" else f"run_{storage}"
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_round_trip_matches_calibrated_folder(tmp_path: Path, storage: str) -> None:
+    run = make_raw_run("bag_0001", duration_s=2.0, with_tracker=True, counts_start=2**31 - 300)
+    path = write_bag(run, tmp_path / _name(storage), storage=storage)  # type: ignore[arg-type]
+    assert path.exists()
+    if storage != "rosbag1":
+        suffix = ".db3" if storage == "sqlite3" else ".mcap"
+        assert (path / "metadata.yaml").exists() and (path / f"{path.name}{suffix}").exists()
+    back = read_bag(path)
+    ref = calibrate_raw_run(run)
+    assert back.manifest == run.manifest
+    for stream, cols in (("encoder", ["t_ns", "input", "output"]),
+                         ("loadcell", ["t_ns", "tension_in_n", "tension_out_n"]),
+                         ("camera", ["t_ns", "value", "confidence"]),
+                         ("tracker", ["t_ns", "value", "confidence"])):
+        a = getattr(ref, stream)[cols].to_numpy(dtype=float)
+        b = getattr(back, stream)[cols].to_numpy(dtype=float)
+        np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12, err_msg=stream)
+    assert list(back.events["event"]) == ["start", "stop"]
+    assert list(back.events["detail"]) == ["", "done"]
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporaries left
+
+
+@pytest.mark.parametrize("storage", ["rosbag1", "mcap"])
+def test_bending_joint_has_input_only(tmp_path: Path, storage: str) -> None:
+    run = make_raw_run("bj_0001", duration_s=1.0, with_output_encoder=False, with_tracker=True,
+                       quantity="tip_angle_deg", unit="deg")
+    back = read_bag(write_bag(run, tmp_path / _name(storage), storage=storage))  # type: ignore[arg-type]
+    assert back.encoder["output"].isna().all()
+    np.testing.assert_allclose(back.tracker["value"], run.tracker["value"], rtol=1e-12)
+
+
+def _truncate(path: Path) -> None:
+    files = [path] if path.is_file() else [p for p in path.iterdir() if p.suffix != ".yaml"]
+    for f in files:
+        data = f.read_bytes()
+        f.write_bytes(data[: len(data) // 2])
+
+
+def _corrupt(path: Path) -> None:
+    files = [path] if path.is_file() else [p for p in path.iterdir() if p.suffix != ".yaml"]
+    for f in files:
+        data = bytearray(f.read_bytes())
+        rng = np.random.default_rng(1)
+        for i in rng.integers(0, len(data), 400):
+            data[i] ^= 0xFF
+        data[:16] = b"\x00" * 16
+        f.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+@pytest.mark.parametrize("damage", [_truncate, _corrupt], ids=["truncated", "corrupt"])
+def test_damaged_bag_is_a_clear_error(tmp_path: Path, storage: str, damage: object) -> None:
+    run = make_raw_run("dmg_0001", duration_s=1.0)
+    path = write_bag(run, tmp_path / _name(storage), storage=storage)  # type: ignore[arg-type]
+    damage(path)  # type: ignore[operator]
+    with pytest.raises(RigIOError, match="truncated or corrupt bag") as err:
+        read_bag(path)
+    assert str(path) in str(err.value)
+
+
+def _ros2_bag(path: Path, topics: dict[str, list[tuple[int, object, str]]]) -> Path:
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    with Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        for topic, msgs in topics.items():
+            conn = w.add_connection(topic, msgs[0][2], typestore=ts)
+            for t, msg, typ in msgs:
+                w.write(conn, t, ts.serialize_cdr(msg, typ))
+    return path
+
+
+def _manifest_msg(run_id: str) -> tuple[int, object, str]:
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    man = make_raw_run(run_id, duration_s=0.1).manifest
+    return (0, ts.types["std_msgs/msg/String"](data=json.dumps(man)), "std_msgs/msg/String")
+
+
+def test_missing_required_topic(tmp_path: Path) -> None:
+    path = _ros2_bag(tmp_path / "nojoints", {"/rig/manifest": [_manifest_msg("nj_0001")]})
+    with pytest.raises(RigIOError, match=r"run 'nj_0001'.*required topic /rig/joints is missing"):
+        read_bag(path)
+
+
+def test_manifest_from_sidecar_or_error(tmp_path: Path) -> None:
+    run = make_raw_run("side_0001", duration_s=1.0)
+    path = write_bag(run, tmp_path / "side.bag", storage="rosbag1")
+    # Rebuild the bag without the manifest topic by filtering through rosbags' reader.
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag1 import Writer as Writer1
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    stripped = tmp_path / "stripped.bag"
+    with AnyReader([path]) as r, Writer1(stripped) as w:
+        conns = {}
+        for c, t, raw in r.messages():
+            if c.topic == "/rig/manifest":
+                continue
+            if c.topic not in conns:
+                conns[c.topic] = w.add_connection(c.topic, c.msgtype, typestore=ts)
+            w.write(conns[c.topic], t, raw)
+    with pytest.raises(RigIOError, match=r"/rig/manifest is missing.*stripped.bag.manifest.json"):
+        read_bag(stripped)
+    sidecar_manifest(stripped).write_text(json.dumps(run.manifest))
+    back = read_bag(stripped)
+    assert back.run_id == "side_0001" and len(back.encoder) == 100
+
+
+def test_bag_value_checks(tmp_path: Path) -> None:
+    run = make_raw_run("est_0001", duration_s=1.0)
+    run.events.loc[1, "event"] = "estop"  # type: ignore[union-attr]
+    path = write_bag(run, tmp_path / "e.bag", storage="rosbag1")
+    with pytest.raises(RigIOError, match=r"est_0001.*e.bag.*t=990000000 ns.*emergency stop"):
+        read_bag(path)
