@@ -1,0 +1,772 @@
+"""Hysteresis compensation: inverse feed-forward, vision feedback, AME-PD and "ours".
+
+Pure and plant-agnostic: a *plant* is any callable ``step(command) -> Mapping[str, float]``
+that advances the rig by one control tick (the virtual rig's ``VirtualRig.step``, or a stand-in
+plant in a test) and returns at least the key named by ``output_key``. Nothing here touches
+files, MLflow or the virtual rig's internals.
+
+The schemes (papers in ``/work/shared/seeds``):
+
+* **inverse feed-forward** (seed 001 section 4.6-4.7, seed 002 eq. 4): run a model's inverse on
+  the desired output and play the resulting input open loop (:func:`run_open_loop`);
+* the per-step **Gamma inverse** Gamma_k^{-1} with the LSQ_Opt solvers of Table 4.4
+  (Nelder-Mead, an interior-point solver, bounded scalar search) and our exact piecewise-linear
+  solution (:func:`gamma_step_inverse`, :func:`gamma_inverse`);
+* **vision feedback** (seed 002 baseline "Feedback Com"): an integral loop closed on a 30 Hz,
+  delayed, noisy camera (:class:`CameraModel`, :func:`run_vision_feedback`);
+* **PD / AME-PD** (seed 000 eq. 19-25) with the UKF active estimation of the model error of the
+  Coleman-Hodgdon reference model (eq. 12-18) (:class:`ModelErrorUKF`, :func:`run_ame_pd`);
+* **ours** (:func:`run_inverse_with_error_correction`): the exact Gamma inverse with an online
+  estimate of the model's output error (a scalar random-walk Kalman filter on the residual of the
+  delayed measurement against the model's own prediction, i.e. the UKF idea of seed 000 moved
+  to the output side), so the inverse aims at ``desired - estimated error``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy import optimize
+
+from hysteresis.base import HysteresisError, as_1d
+from hysteresis.metrics import error_statistics
+
+FloatArray = npt.NDArray[np.float64]
+StepFn = Callable[[float], Mapping[str, float]]
+
+__all__ = [
+    "CHParams", "CameraModel", "LoopResult", "ModelErrorUKF", "PlayBank", "StrokeLimits",
+    "ch_simulate", "fit_coleman_hodgdon_ga", "fit_play_bank", "gamma_inverse",
+    "gamma_step_inverse", "mixed_sine_profile", "reduction", "run_ame_pd",
+    "run_inverse_with_error_correction", "run_open_loop", "run_vision_feedback",
+    "seed000_target", "seed002_motion", "segment_statistics", "sine_profile",
+    "triangle_profile", "GAMMA_METHODS",
+]
+
+
+# ---------------------------------------------------------------------------------------------
+# Results and small helpers
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class LoopResult:
+    """Time series of one compensation run (all arrays the same length, one per tick)."""
+
+    scheme: str
+    t_s: FloatArray
+    desired: FloatArray
+    command: FloatArray
+    output: FloatArray
+    measured: FloatArray  # what the controller saw at each tick (NaN: nothing new)
+    extra: dict[str, FloatArray] = field(default_factory=dict)
+
+    def error(self) -> FloatArray:
+        """Tracking error ``output - desired`` (seed 001 sign: measured minus model/target)."""
+        return self.output - self.desired
+
+    def statistics(self, *, skip_s: float = 0.0) -> dict[str, float]:
+        """:func:`hysteresis.metrics.error_statistics` of output vs desired after ``skip_s``."""
+        keep = self.t_s >= self.t_s[0] + skip_s
+        return error_statistics(self.output[keep], self.desired[keep])
+
+
+@dataclass(frozen=True)
+class StrokeLimits:
+    """The rig's input stroke; every command is clipped into ``[low, high]``."""
+
+    low: float = -math.inf
+    high: float = math.inf
+
+    def __post_init__(self) -> None:
+        if not self.low < self.high:
+            raise HysteresisError(
+                f"stroke limits must satisfy low < high, got {self.low}, {self.high}"
+            )
+
+    def clip(self, value: float) -> float:
+        return min(max(value, self.low), self.high)
+
+    def contains(self, values: Any) -> bool:
+        arr = np.asarray(values, dtype=np.float64)
+        return bool(np.all((arr >= self.low - 1e-12) & (arr <= self.high + 1e-12)))
+
+
+def reduction(before: float, after: float) -> float:
+    """Relative reduction in percent, ``100 (1 - after / before)``."""
+    return float("nan") if before == 0 else 100.0 * (1.0 - after / before)
+
+
+def _output(sample: Mapping[str, float], key: str) -> float:
+    try:
+        return float(sample[key])
+    except KeyError:
+        raise HysteresisError(
+            f"the plant's step() returned no {key!r}; it returned {sorted(sample)}"
+        ) from None
+
+
+def _ticks(n: int, dt_s: float) -> FloatArray:
+    return np.arange(n, dtype=np.float64) * dt_s
+
+
+def _check_dt(dt_s: float) -> None:
+    if not (dt_s > 0 and math.isfinite(dt_s)):
+        raise HysteresisError(f"dt_s must be a positive finite number, got {dt_s}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Desired profiles
+# ---------------------------------------------------------------------------------------------
+def mixed_sine_profile(t_s: Any) -> FloatArray:
+    """Seed 001 eq. 4.11 (mm):
+    7 sin(pi t/4) + 2 sin(1.1 pi t/4) - 4 sin(0.2 pi t/4) + sin(0.45 pi t/4)."""
+    t = np.asarray(t_s, dtype=np.float64)
+    w = math.pi / 4.0
+    return np.asarray(
+        7 * np.sin(w * t) + 2 * np.sin(1.1 * w * t) - 4 * np.sin(0.2 * w * t)
+        + np.sin(0.45 * w * t),
+        dtype=np.float64,
+    )
+
+
+def sine_profile(
+    t_s: Any, *, amplitudes: Sequence[float] = (6.0, 4.5, 3.0, 1.5), periods_per_amplitude: int = 5,
+    frequency_hz: float = 0.25,
+) -> FloatArray:
+    """Seed 001 decaying sinusoid (Fig. 4.8), ``periods_per_amplitude`` periods per amplitude."""
+    t = np.asarray(t_s, dtype=np.float64)
+    seg = periods_per_amplitude / frequency_hz
+    idx = np.minimum((t // seg).astype(int), len(amplitudes) - 1)
+    amp = np.asarray(amplitudes, dtype=np.float64)[idx]
+    out = amp * np.sin(2 * math.pi * frequency_hz * t)
+    return np.asarray(np.where(t < seg * len(amplitudes), out, 0.0), dtype=np.float64)
+
+
+def triangle_profile(
+    t_s: Any, *, amplitudes: Sequence[float] = (6.0, 4.5, 3.0, 1.5), periods_per_amplitude: int = 1,
+    slope_mm_s: float = 6.0,
+) -> FloatArray:
+    """Seed 001 triangle wave of slope ``slope_mm_s`` (Fig. 4.9a), decaying amplitudes, from 0."""
+    t = np.asarray(t_s, dtype=np.float64)
+    out = np.zeros_like(t)
+    t0 = 0.0
+    for a in amplitudes:
+        period = 4.0 * a / slope_mm_s
+        for _ in range(periods_per_amplitude):
+            m = (t >= t0) & (t < t0 + period)
+            ph = (t[m] - t0) / period  # 0..1: up to +a, down to -a, back to 0
+            out[m] = a * np.where(ph < 0.25, 4 * ph, np.where(ph < 0.75, 2 - 4 * ph, 4 * ph - 4))
+            t0 += period
+    return out
+
+
+def seed000_target(t_s: Any) -> FloatArray:
+    """Seed 000 eq. 32: alpha_d(t) = -50 cos(pi t / 50) + 80 (deg)."""
+    t = np.asarray(t_s, dtype=np.float64)
+    return np.asarray(-50.0 * np.cos(math.pi * t / 50.0) + 80.0, dtype=np.float64)
+
+
+def seed002_motion(
+    t_s: Any, *, omega_rad_s: float | None, amplitude: float = 30.0, offset: float = 30.0,
+) -> FloatArray:
+    """Seed 002 motions: ``amplitude sin(omega t) + offset``; ``omega=None`` is the non-periodic
+    motion, the normalised sum of the three periodic ones (omega 0.25, 0.5, 1 rad/s)."""
+    t = np.asarray(t_s, dtype=np.float64)
+    if omega_rad_s is not None:
+        return np.asarray(amplitude * np.sin(omega_rad_s * t) + offset, dtype=np.float64)
+    parts = [np.sin(w * t + ph) for w, ph in ((0.25, 0.0), (0.5, 1.0), (1.0, 2.0))]
+    mix = np.sum(parts, axis=0)
+    mix = mix - mix[0]  # start at the offset, like the periodic motions
+    scale = float(np.max(np.abs(mix))) or 1.0
+    return np.asarray(amplitude * mix / scale + offset, dtype=np.float64)
+
+
+# ---------------------------------------------------------------------------------------------
+# Open-loop runs (no compensation, or an inverse feed-forward input)
+# ---------------------------------------------------------------------------------------------
+def run_open_loop(
+    step: StepFn, command: Any, *, desired: Any, dt_s: float = 0.01, output_key: str = "output",
+    stroke: StrokeLimits | None = None, scheme: str = "open_loop",
+) -> LoopResult:
+    """Play ``command`` (clipped to ``stroke``) through the plant, one tick per sample."""
+    _check_dt(dt_s)
+    u = as_1d(command, "command")
+    yd = as_1d(desired, "desired")
+    if u.shape != yd.shape:
+        raise HysteresisError(f"command and desired differ in length: {u.size} vs {yd.size}")
+    lim = stroke or StrokeLimits()
+    applied = np.clip(u, lim.low, lim.high)
+    y = np.empty_like(u)
+    for k in range(u.size):
+        y[k] = _output(step(float(applied[k])), output_key)
+    t = _ticks(u.size, dt_s)
+    return LoopResult(scheme, t, yd, applied, y, np.full_like(y, np.nan))
+
+
+# ---------------------------------------------------------------------------------------------
+# The complex play operator Gamma_n (seed 001 eq. 4.8-4.9) and its per-step inverse
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PlayBank:
+    """Gamma_n: ``y = offset + sum_i q_i gamma_i(v)`` with play operators of plays ``p_i >= 0``.
+
+    Each operator follows eq. 4.8: its output stays in ``[v - p_i, v]`` and only moves when
+    pushed, ``w_i(k) = min(v, max(v - p_i, w_i(k-1)))``. ``scale`` maps the input first
+    (``v = scale * u``) so the operator can work in output units.
+    """
+
+    plays: FloatArray
+    weights: FloatArray
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.plays, dtype=np.float64)
+        q = np.asarray(self.weights, dtype=np.float64)
+        if p.ndim != 1 or p.shape != q.shape or p.size == 0:
+            raise HysteresisError(
+                f"plays and weights must be equal-length 1-D arrays, got {p.shape}, {q.shape}"
+            )
+        if np.any(p < 0) or not np.all(np.isfinite(p)) or not np.all(np.isfinite(q)):
+            raise HysteresisError("plays must be finite and >= 0 and weights finite")
+        object.__setattr__(self, "plays", p)
+        object.__setattr__(self, "weights", q)
+
+    def initial_state(self, v0: float = 0.0) -> FloatArray:
+        """Rest state at input ``v0`` (seed 001: W(1) = 0 at v = 0)."""
+        return np.full(self.plays.size, float(v0))
+
+    def step(self, v: float, state: FloatArray) -> tuple[float, FloatArray]:
+        new = np.minimum(v, np.maximum(v - self.plays, state))
+        return float(self.offset + self.weights @ new), new
+
+    def output_at(self, v: float, state: FloatArray) -> float:
+        """Output for input ``v`` from ``state`` without committing the move."""
+        return float(self.offset + self.weights @ np.minimum(v, np.maximum(v - self.plays, state)))
+
+    def predict(self, u: Any, *, state: FloatArray | None = None) -> FloatArray:
+        uu = as_1d(u, "u")
+        w = self.initial_state() if state is None else np.asarray(state, dtype=np.float64).copy()
+        out = np.empty_like(uu)
+        for k, v in enumerate(uu):
+            out[k], w = self.step(float(v), w)
+        return out
+
+    def basis(self, u: Any) -> FloatArray:
+        """Operator outputs ``(N, n)`` from rest; ``predict = offset + basis @ weights``."""
+        uu = as_1d(u, "u")
+        w = self.initial_state()
+        out = np.empty((uu.size, self.plays.size))
+        for k, v in enumerate(uu):
+            w = np.minimum(v, np.maximum(v - self.plays, w))
+            out[k] = w
+        return out
+
+
+def fit_play_bank(
+    u: Any, y: Any, *, plays: Sequence[float] | None = None, n: int = 11,
+    max_play: float | None = None,
+    ridge: float = 1e-6,
+) -> PlayBank:
+    """Least-squares weights (and an offset) of Gamma_n for the pair ``(u, y)`` (seed 001 eq.
+    4.10 without the sum-to-one constraint, which the thesis itself blames for its biased mean
+    error). Default plays: ``n`` equally spaced in ``[0, max_play]``, ``max_play`` a third of the
+    input's range."""
+    uu = as_1d(u, "u")
+    yy = as_1d(y, "y")
+    if uu.shape != yy.shape:
+        raise HysteresisError(f"u and y differ in length: {uu.size} vs {yy.size}")
+    if plays is None:
+        span = float(np.ptp(uu))
+        if span <= 0:
+            raise HysteresisError("u is constant; cannot choose play amounts")
+        top = span / 3.0 if max_play is None else float(max_play)
+        plays = list(np.linspace(0.0, top, n))
+    bank0 = PlayBank(np.asarray(plays, dtype=np.float64), np.zeros(len(plays)))
+    phi = np.column_stack([bank0.basis(uu), np.ones(uu.size)])
+    # A small ridge keeps nearly collinear operators from trading huge opposite weights.
+    gram = phi.T @ phi + ridge * float(np.trace(phi.T @ phi)) / phi.shape[1] * np.eye(phi.shape[1])
+    coef = np.linalg.solve(gram, phi.T @ yy)
+    return PlayBank(bank0.plays, coef[:-1], float(coef[-1]))
+
+
+GAMMA_METHODS = ("exact", "bounded", "nelder-mead", "slsqp", "interior-point")
+
+
+def _exact_candidates(bank: PlayBank, target: float, state: FloatArray) -> list[float]:
+    """All inputs v with Gamma(v; state) == target (the map is continuous piecewise linear)."""
+    p, q, w = bank.plays, bank.weights, state
+    bps = np.unique(np.concatenate([w, w + p]))
+    vals = bank.offset + np.minimum(bps[:, None], np.maximum(bps[:, None] - p, w)) @ q
+    d = vals - target
+    cands: list[float] = []
+    total = float(q.sum())  # slope left of all breakpoints and right of all of them
+    if total != 0.0:
+        v_left = bps[0] - d[0] / total
+        if v_left <= bps[0]:
+            cands.append(float(v_left))
+        v_right = bps[-1] - d[-1] / total
+        if v_right >= bps[-1]:
+            cands.append(float(v_right))
+    sign_change = np.flatnonzero(d[:-1] * d[1:] <= 0.0)
+    for j in sign_change:
+        d0, d1 = d[j], d[j + 1]
+        if d0 == d1:  # a flat piece exactly at the target
+            cands.extend([float(bps[j]), float(bps[j + 1])])
+        else:
+            cands.append(float(bps[j] + (bps[j + 1] - bps[j]) * d0 / (d0 - d1)))
+    if not cands:  # unreachable target (non-monotone weights): closest breakpoint output
+        cands.append(float(bps[int(np.argmin(np.abs(d)))]))
+    return cands
+
+
+def gamma_step_inverse(
+    bank: PlayBank, target: float, state: FloatArray, v_prev: float, *, method: str = "exact",
+    bounds: tuple[float, float] | None = None, tol: float = 1e-6,
+) -> tuple[float, FloatArray]:
+    """One step of Gamma_k^{-1} (seed 001 Fig. 4.25-4.33): the input ``v_k`` whose output from
+    ``state`` (W_{k-1}) is ``target``, started at ``v_prev``; returns ``(v_k, W_k)``.
+
+    ``method``: ``exact`` (ours: solve the piecewise-linear map at its breakpoints and take the
+    root nearest ``v_prev``), ``bounded`` (FMINBND: golden section + parabolic interpolation on
+    ``bounds``), ``nelder-mead`` (FMINSEARCH), ``slsqp`` and ``interior-point`` (FMINCON-like
+    constrained solvers; SciPy's ``trust-constr`` is its interior-point method).
+    """
+    lo, hi = bounds if bounds is not None else (v_prev - 50.0, v_prev + 50.0)
+    if method == "exact":
+        cands = _exact_candidates(bank, target, state)
+        v = min(cands, key=lambda c: abs(c - v_prev))
+        v = min(max(v, lo), hi)
+    else:
+        def cost(x: Any) -> float:
+            xv = float(np.asarray(x).ravel()[0])
+            return (bank.output_at(xv, state) - target) ** 2
+
+        if method == "bounded":
+            res = optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded",
+                                           options={"xatol": tol})
+            v = float(res.x)
+        elif method == "nelder-mead":
+            # The default simplex (5 % of x0) cannot leave a backlash plateau; start it one
+            # largest play wide, as a tuned FMINSEARCH would be.
+            width = float(np.max(bank.plays)) or 1.0
+            res = optimize.minimize(cost, x0=[v_prev], method="Nelder-Mead",
+                                    options={"xatol": tol, "fatol": tol**2,
+                                             "initial_simplex": [[v_prev], [v_prev + width]]})
+            v = float(res.x[0])
+        elif method == "slsqp":
+            res = optimize.minimize(cost, x0=[v_prev], method="SLSQP", bounds=[(lo, hi)],
+                                    options={"ftol": tol**2})
+            v = float(res.x[0])
+        elif method == "interior-point":
+            with warnings.catch_warnings():  # quasi-Newton noise on the piecewise-linear map
+                warnings.simplefilter("ignore", UserWarning)
+                res = optimize.minimize(cost, x0=[v_prev], method="trust-constr",
+                                        bounds=[(lo, hi)], options={"xtol": tol, "gtol": tol**2})
+            v = float(res.x[0])
+        else:
+            raise HysteresisError(
+                f"unknown inverse method {method!r}; known: {', '.join(GAMMA_METHODS)}"
+            )
+    _, new_state = bank.step(v, state)
+    return v, new_state
+
+
+def gamma_inverse(
+    bank: PlayBank, desired: Any, *, method: str = "exact", stroke: StrokeLimits | None = None,
+    v0: float = 0.0, max_steps: int | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Recursive inverse of a whole desired trajectory; returns ``(inputs, seconds_per_step)``.
+
+    The search of step k starts at ``v_{k-1}`` (Fig. 4.32); ``max_steps`` stops early (timing
+    the slow solvers on a prefix)."""
+    yd = as_1d(desired, "desired")
+    if max_steps is not None:
+        yd = yd[:max_steps]
+    lim = stroke or StrokeLimits()
+    pmax = float(np.max(bank.plays))
+    slope = max(abs(float(bank.weights.sum())), 1e-6)
+    state = bank.initial_state(v0)
+    v_prev = v0
+    y_prev = bank.output_at(v0, state)
+    out = np.empty_like(yd)
+    times = np.empty_like(yd)
+    for k, target in enumerate(yd):
+        # Search interval for the bracketing solvers: the input may have to cross the largest
+        # play (a reversal) plus the step in output over the outer slope, with a margin.
+        half = 1.5 * pmax + 3.0 * abs(float(target) - y_prev) / slope + 1e-3
+        lo = max(lim.low, v_prev - half)
+        hi = min(lim.high, v_prev + half)
+        t0 = time.perf_counter()
+        v, state = gamma_step_inverse(bank, float(target), state, v_prev, method=method,
+                                      bounds=(lo, hi))
+        times[k] = time.perf_counter() - t0
+        out[k] = v
+        v_prev = v
+        y_prev = float(target)
+    return out, times
+
+
+# ---------------------------------------------------------------------------------------------
+# A camera: 30 Hz frames, stamped late, noisy (seed 002; the rig log format's camera stream)
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CameraModel:
+    """Frames every ``1/rate_hz`` s of the true output, delivered ``latency_s`` late with
+    Gaussian noise ``noise_std``; ``rate_hz=None`` means every tick, no latency, no noise."""
+
+    rate_hz: float | None = 30.0
+    latency_s: float = 0.045
+    noise_std: float = 0.0
+    seed: int = 0
+
+
+class _Camera:
+    def __init__(self, model: CameraModel, dt_s: float) -> None:
+        self.model = model
+        self.dt_s = dt_s
+        self.rng = np.random.default_rng(model.seed)
+        self.queue: deque[tuple[float, float, float]] = deque()  # (t_available, t_capture, value)
+        self.next_frame = 0.0
+
+    def observe(self, t: float, true_value: float) -> tuple[float, float] | None:
+        """Feed the truth at tick time ``t``; return a newly delivered (t_capture, value)."""
+        m = self.model
+        if m.rate_hz is None:
+            return t, true_value
+        if t + 1e-12 >= self.next_frame:
+            noise = m.noise_std * float(self.rng.standard_normal()) if m.noise_std else 0.0
+            noisy = true_value + noise
+            self.queue.append((t + m.latency_s, t, noisy))
+            self.next_frame += 1.0 / m.rate_hz
+        delivered = None
+        while self.queue and self.queue[0][0] <= t + 1e-12:
+            _, tc, val = self.queue.popleft()
+            delivered = (tc, val)
+        return delivered
+
+
+# ---------------------------------------------------------------------------------------------
+# Vision feedback (seed 002 baseline "Feedback Com")
+# ---------------------------------------------------------------------------------------------
+def run_vision_feedback(
+    step: StepFn, desired: Any, *, dt_s: float = 0.01, camera: CameraModel = CameraModel(),
+    gain: float = 0.3, kp: float = 0.0, feedforward: Any = None, output_key: str = "output",
+    stroke: StrokeLimits | None = None,
+) -> LoopResult:
+    """Command = feed-forward (default: the desired itself) + a correction closed on the camera.
+
+    At each delivered frame the error against the desired *at the frame's capture time* is
+    integrated, ``c += gain * e`` (a per-frame integrator, robust to the frame latency) and a
+    proportional part ``kp * e`` is added. Without a frame the command holds its correction.
+    """
+    _check_dt(dt_s)
+    yd = as_1d(desired, "desired")
+    ff = yd if feedforward is None else as_1d(feedforward, "feedforward")
+    if ff.shape != yd.shape:
+        raise HysteresisError("feedforward and desired differ in length")
+    if not 0.0 <= gain < 2.0:
+        raise HysteresisError(f"gain must be in [0, 2) for a stable integrator, got {gain}")
+    lim = stroke or StrokeLimits()
+    cam = _Camera(camera, dt_s)
+    n = yd.size
+    u = np.empty(n)
+    y = np.empty(n)
+    seen = np.full(n, np.nan)
+    integ = 0.0
+    prop = 0.0
+    for k in range(n):
+        u[k] = lim.clip(float(ff[k]) + integ + prop)
+        y[k] = _output(step(float(u[k])), output_key)
+        got = cam.observe(k * dt_s, y[k])
+        if got is not None:
+            tc, val = got
+            seen[k] = val
+            e = float(yd[min(int(round(tc / dt_s)), n - 1)]) - val
+            integ += gain * e
+            # Anti-windup: the correction cannot push the command beyond the stroke.
+            integ = min(max(integ, lim.low - float(ff[k])), lim.high - float(ff[k]))
+            prop = kp * e
+    return LoopResult("vision_feedback", _ticks(n, dt_s), yd, u, y, seen)
+
+
+# ---------------------------------------------------------------------------------------------
+# Coleman-Hodgdon reference model (seed 000 eq. 10-11) and its GA identification (eq. 26)
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CHParams:
+    """Seed 000 eq. 10: d alpha/dt = A |v| (C (l - O_l) - (alpha - O_alpha)) + B v, v = dl/dt."""
+
+    A: float
+    B: float
+    C: float
+    O_l: float = 0.0
+    O_alpha: float = 0.0
+
+    def rate(self, alpha: float, pull: float, v: float) -> float:
+        return self.A * abs(v) * (self.C * (pull - self.O_l) - (alpha - self.O_alpha)) + self.B * v
+
+
+def ch_simulate(params: CHParams, pull: Any, *, alpha0: float | None = None) -> FloatArray:
+    """Euler simulation of eq. 10 on the sampled tendon pull (the discrete form of eq. 16)."""
+    ll = as_1d(pull, "l")
+    out = np.empty_like(ll)
+    a = params.O_alpha + params.C * (ll[0] - params.O_l) if alpha0 is None else float(alpha0)
+    out[0] = a
+    A, B, C, Ol, Oa = params.A, params.B, params.C, params.O_l, params.O_alpha
+    for k in range(1, ll.size):
+        dl = ll[k] - ll[k - 1]  # v * Ts
+        a = a + A * abs(dl) * (C * (ll[k - 1] - Ol) - (a - Oa)) + B * dl
+        out[k] = a
+    return out
+
+
+def fit_coleman_hodgdon_ga(
+    pull: Any, alpha: Any, *, seed: int = 0, maxiter: int = 60, popsize: int = 15,
+    bounds: Mapping[str, tuple[float, float]] | None = None,
+) -> CHParams:
+    """GA-style identification of A, B, C (and the backlash origin O_alpha) minimising the MSE
+    of eq. 26, by SciPy's differential evolution (an evolutionary algorithm like the paper's GA).
+    ``O_l`` is fixed at the first pull sample."""
+    ll, aa = as_1d(pull, "l"), as_1d(alpha, "alpha")
+    if ll.shape != aa.shape:
+        raise HysteresisError("pull and alpha differ in length")
+    slope = float(np.polyfit(ll, aa, 1)[0])
+    b = dict(bounds or {})
+    A_b = b.get("A", (1e-3, 20.0 / max(float(np.ptp(ll)), 1e-9)))
+    B_b = b.get("B", (-3.0 * abs(slope) - 1.0, 3.0 * abs(slope) + 1.0))
+    C_b = b.get("C", (0.0, 3.0 * abs(slope) + 1.0))
+    span = float(np.ptp(aa))
+    Oa_b = b.get("O_alpha", (float(aa.min()) - span, float(aa.max()) + span))
+    O_l = float(ll[0])
+
+    def mse(x: FloatArray) -> float:
+        sim = ch_simulate(CHParams(x[0], x[1], x[2], O_l, x[3]), ll, alpha0=float(aa[0]))
+        return float(np.mean((aa - sim) ** 2))
+
+    # Decimate for speed: the model is slow, and eq. 10 is rate-independent.
+    res = optimize.differential_evolution(
+        mse, [A_b, B_b, C_b, Oa_b], seed=seed, maxiter=maxiter, popsize=popsize, tol=1e-8,
+        polish=True,
+    )
+    x = res.x
+    return CHParams(float(x[0]), float(x[1]), float(x[2]), O_l, float(x[3]))
+
+
+# ---------------------------------------------------------------------------------------------
+# UKF active estimation of the model error (seed 000 eq. 12-18)
+# ---------------------------------------------------------------------------------------------
+class ModelErrorUKF:
+    """State ``X = [alpha~, f_h]``; process eq. 16, measurement ``Y = alpha~ + V``.
+
+    The paper's 2n+1 sigma points (Merwe scaling, alpha=1, beta=2, kappa=1). Defaults are
+    the paper's eq. 29: P0 = diag(10, 10), Q = diag(5, 15),
+    R = 1e-4 (deg^2 per step)."""
+
+    def __init__(
+        self, params: CHParams, *, dt_s: float, alpha0: float, P0: Sequence[float] = (10.0, 10.0),
+        Q: Sequence[float] = (5.0, 15.0), R: float = 1e-4,
+    ) -> None:
+        _check_dt(dt_s)
+        self.p = params
+        self.dt = dt_s
+        self.x = np.array([float(alpha0), 0.0])
+        self.P = np.diag(np.asarray(P0, dtype=np.float64))
+        self.Q = np.diag(np.asarray(Q, dtype=np.float64))
+        self.R = float(R)
+        # Merwe scaled sigma points with alpha=1, beta=2, kappa=1: lambda = 1, all weights > 0.
+        n, kappa, beta = 2, 1.0, 2.0
+        lam = (n + kappa) - n
+        self._c = n + lam
+        self.Wm = np.full(2 * n + 1, 1.0 / (2 * self._c))
+        self.Wm[0] = lam / self._c
+        self.Wc = self.Wm.copy()
+        self.Wc[0] += beta  # + (1 - alpha^2 + beta) with alpha = 1
+        self._sig = np.zeros((n, 2 * n + 1))
+
+    def _f(self, sig: FloatArray, pull: float, v: float) -> FloatArray:
+        p = self.p
+        out = sig.copy()
+        out[0] = sig[0] + self.dt * (
+            p.A * abs(v) * (p.C * (pull - p.O_l) - (sig[0] - p.O_alpha)) + p.B * v + sig[1]
+        )
+        return out
+
+    def predict(self, pull: float, v: float) -> None:
+        """Time update with the pull at step k and the pull velocity ``v``."""
+        L = np.linalg.cholesky(self._c * self.P + 1e-12 * np.eye(2))
+        sig = np.column_stack([self.x, self.x[:, None] + L, self.x[:, None] - L])
+        prop = np.column_stack([self._f(sig[:, i], pull, v) for i in range(sig.shape[1])])
+        self.x = prop @ self.Wm
+        d = prop - self.x[:, None]
+        self.P = (d * self.Wc) @ d.T + self.Q
+        self._sig = prop
+
+    def update(self, y: float) -> None:
+        """Measurement update with the measured angle ``y``."""
+        ys = self._sig[0]
+        ym = float(ys @ self.Wm)
+        dy = ys - ym
+        dx = self._sig - self.x[:, None]
+        Py = float((dy * self.Wc) @ dy) + self.R
+        Pxy = (dx * self.Wc) @ dy
+        K = Pxy / Py
+        self.x = self.x + K * (y - ym)
+        self.P = self.P - np.outer(K, K) * Py
+        self.P = 0.5 * (self.P + self.P.T)
+
+
+def estimate_model_error(
+    params: CHParams, pull: Any, alpha_meas: Any, *, dt_s: float, **ukf_kw: Any,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Offline run of the estimator over a recorded pull/angle pair (seed 000 section V.C).
+
+    Returns ``(alpha_model, alpha_est, f_h)``: the reference model alone (eq. 10), the UKF's
+    enhanced estimate alpha_EstM (eq. 16-18) and the model-error estimate."""
+    ll, aa = as_1d(pull, "l"), as_1d(alpha_meas, "alpha_meas")
+    if ll.shape != aa.shape:
+        raise HysteresisError("pull and alpha_meas differ in length")
+    model = ch_simulate(params, ll, alpha0=float(aa[0]))
+    ukf = ModelErrorUKF(params, dt_s=dt_s, alpha0=float(aa[0]), **ukf_kw)
+    est = np.empty_like(ll)
+    fh = np.empty_like(ll)
+    est[0], fh[0] = aa[0], 0.0
+    for k in range(1, ll.size):
+        ukf.predict(float(ll[k - 1]), float((ll[k] - ll[k - 1]) / dt_s))
+        ukf.update(float(aa[k]))
+        est[k], fh[k] = ukf.x
+    return model, est, fh
+
+
+def segment_statistics(measured: Any, estimate: Any) -> dict[str, float]:
+    """Seed 000 eq. 27-31: mean |Err| and Var (population) of ``measured - estimate``."""
+    s = error_statistics(measured, estimate)
+    return {"abs_err": s["mean_abs_error"], "var": s["var_error"]}
+
+
+# ---------------------------------------------------------------------------------------------
+# PD and AME-PD (seed 000 eq. 19-25)
+# ---------------------------------------------------------------------------------------------
+def run_ame_pd(
+    step: StepFn, desired: Any, params: CHParams | None, *, dt_s: float = 0.01, kp: float = 0.02,
+    kd: float = 0.05, kc: float = 0.06, control_every: int = 1, camera: CameraModel | None = None,
+    output_key: str = "output", stroke: StrokeLimits | None = None, l0: float = 0.0,
+    ukf_kw: Mapping[str, Any] | None = None,
+) -> LoopResult:
+    """Velocity-command tracking of ``desired`` (angles) by pulling the tendon (the command is
+    the pull position, integrated from the controller's velocity).
+
+    PD: ``v = kp e + kd (e - e_prev)/Ts`` (eq. 21) - pass ``params=None`` or ``kc=0``.
+    AME-PD: ``+ kc * e_hat_{k+1}`` (eq. 24-25), the error predicted one controller period ahead
+    by the UKF-enhanced reference model (eq. 22-23). The controller runs every
+    ``control_every`` ticks (Ts = control_every * dt_s) on the newest measurement (``camera``
+    delays/decimates it; default: the output every tick).
+    """
+    _check_dt(dt_s)
+    if control_every < 1:
+        raise HysteresisError(f"control_every must be >= 1, got {control_every}")
+    yd = as_1d(desired, "desired")
+    lim = stroke or StrokeLimits()
+    ts = dt_s * control_every
+    cam = _Camera(camera or CameraModel(rate_hz=None), dt_s)
+    use_ame = params is not None and kc != 0.0
+    n = yd.size
+    u = np.empty(n)
+    y = np.empty(n)
+    seen = np.full(n, np.nan)
+    fh_log = np.full(n, np.nan)
+    est_log = np.full(n, np.nan)
+    pull = lim.clip(l0)
+    v = 0.0
+    e_prev: float | None = None
+    latest: float | None = None
+    ukf: ModelErrorUKF | None = None
+    l_at_ctrl = pull
+    for k in range(n):
+        u[k] = pull
+        y[k] = _output(step(float(pull)), output_key)
+        got = cam.observe(k * dt_s, y[k])
+        if got is not None:
+            latest = got[1]
+            seen[k] = latest
+        if k % control_every == 0 and latest is not None:
+            if use_ame and params is not None:
+                if ukf is None:
+                    ukf = ModelErrorUKF(params, dt_s=ts, alpha0=latest, **dict(ukf_kw or {}))
+                else:
+                    # Time update over the last control period with the velocity applied.
+                    ukf.predict(l_at_ctrl, (pull - l_at_ctrl) / ts)
+                    ukf.update(latest)
+                est_log[k], fh_log[k] = ukf.x
+            l_at_ctrl = pull
+            e = float(yd[k]) - latest
+            v = kp * e + (kd * (e - e_prev) / ts if e_prev is not None else 0.0)
+            e_prev = e
+            if use_ame and ukf is not None and params is not None:
+                a_est, fh = float(ukf.x[0]), float(ukf.x[1])
+                a_hat = a_est + ts * (params.rate(a_est, pull, v) + fh)
+                e_hat = float(yd[min(k + control_every, n - 1)]) - a_hat
+                v = v + kc * e_hat
+        pull = lim.clip(pull + v * dt_s)
+    scheme = "ame_pd" if use_ame else "pd"
+    return LoopResult(scheme, _ticks(n, dt_s), yd, u, y, seen,
+                      {"f_h": fh_log, "alpha_est": est_log})
+
+
+# ---------------------------------------------------------------------------------------------
+# Ours: exact Gamma inverse + online model-error estimate
+# ---------------------------------------------------------------------------------------------
+def run_inverse_with_error_correction(
+    step: StepFn, desired: Any, bank: PlayBank, *, dt_s: float = 0.01,
+    camera: CameraModel | None = None, process_var: float = 1e-3, meas_var: float = 1e-2,
+    output_key: str = "output", stroke: StrokeLimits | None = None, v0: float = 0.0,
+    correct: bool = True,
+) -> LoopResult:
+    """Our compensator: ``u_k = Gamma^{-1}(desired_k - f_hat)`` with the exact step inverse.
+
+    ``f_hat`` is a random-walk Kalman estimate of the model's output error
+    ``f = measured - Gamma(u)``; each delivered measurement is compared with the model's own
+    prediction *at the measurement's capture time* (so the camera's latency does not enter the
+    loop: the correction is open loop on the estimate, like seed 000's enhancement, and cannot
+    destabilise the plant). ``correct=False`` is the plain exact-inverse feed-forward.
+    """
+    _check_dt(dt_s)
+    yd = as_1d(desired, "desired")
+    lim = stroke or StrokeLimits()
+    cam = _Camera(camera or CameraModel(rate_hz=None), dt_s)
+    n = yd.size
+    u = np.empty(n)
+    y = np.empty(n)
+    ymodel = np.empty(n)
+    seen = np.full(n, np.nan)
+    fh_log = np.empty(n)
+    state = bank.initial_state(v0)
+    v_prev = v0
+    f_hat, P = 0.0, 1.0
+    span = float(np.ptp(yd)) + 10.0 * float(np.max(bank.plays)) + 1.0
+    for k in range(n):
+        target = float(yd[k]) - (f_hat if correct else 0.0)
+        bounds = (max(lim.low, v_prev - span), min(lim.high, v_prev + span))
+        v, state = gamma_step_inverse(bank, target, state, v_prev, method="exact", bounds=bounds)
+        ymodel[k] = float(bank.offset + bank.weights @ state)
+        u[k] = v
+        v_prev = v
+        y[k] = _output(step(float(v)), output_key)
+        got = cam.observe(k * dt_s, y[k])
+        if got is not None:
+            tc, val = got
+            seen[k] = val
+            kc = min(max(int(round(tc / dt_s)), 0), k)
+            P += process_var
+            gain = P / (P + meas_var)
+            f_hat += gain * (val - ymodel[kc] - f_hat)
+            P *= 1.0 - gain
+        fh_log[k] = f_hat
+    return LoopResult("ours" if correct else "gamma_exact_ff", _ticks(n, dt_s), yd, u, y, seen,
+                      {"model_output": ymodel, "f_hat": fh_log})
