@@ -30,7 +30,7 @@ import warnings
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -43,12 +43,12 @@ FloatArray = npt.NDArray[np.float64]
 StepFn = Callable[[float], Mapping[str, float]]
 
 __all__ = [
-    "CHParams", "CameraModel", "LoopResult", "ModelErrorUKF", "PlayBank", "StrokeLimits",
-    "ch_simulate", "fit_coleman_hodgdon_ga", "fit_play_bank", "gamma_inverse",
-    "gamma_step_inverse", "mixed_sine_profile", "reduction", "run_ame_pd",
-    "run_inverse_with_error_correction", "run_open_loop", "run_vision_feedback",
-    "seed000_target", "seed002_motion", "segment_statistics", "sine_profile",
-    "triangle_profile", "GAMMA_METHODS",
+    "CHParams", "CameraModel", "FamilyStepper", "GAMMA_METHODS", "InverseStepper", "LoopResult",
+    "ModelErrorUKF", "PlayBank", "PlayBankStepper", "StrokeLimits", "as_stepper", "ch_simulate",
+    "fit_coleman_hodgdon_ga", "fit_play_bank", "gamma_inverse", "gamma_step_inverse",
+    "mixed_sine_profile", "reduction", "run_ame_pd", "run_inverse_with_error_correction",
+    "run_open_loop", "run_vision_feedback", "seed000_target", "seed002_motion",
+    "segment_statistics", "sine_profile", "triangle_profile",
 ]
 
 
@@ -722,39 +722,105 @@ def run_ame_pd(
 # ---------------------------------------------------------------------------------------------
 # Ours: exact Gamma inverse + online model-error estimate
 # ---------------------------------------------------------------------------------------------
+class InverseStepper(Protocol):
+    """A model's inverse, one tick at a time, with the model state carried inside."""
+
+    def reset(self, u0: float) -> None: ...
+
+    def inverse(self, target: float, *, low: float, high: float) -> tuple[float, float]:
+        """Commit one step: the command in ``[low, high]`` and the model's output for it."""
+        ...
+
+
+class PlayBankStepper:
+    """:class:`PlayBank` with the exact per-step inverse (ours)."""
+
+    def __init__(self, bank: PlayBank) -> None:
+        self.bank = bank
+        self.reset(0.0)
+
+    def reset(self, u0: float) -> None:
+        self.state = self.bank.initial_state(u0)
+        self.v_prev = float(u0)
+
+    def inverse(self, target: float, *, low: float, high: float) -> tuple[float, float]:
+        v, self.state = gamma_step_inverse(self.bank, target, self.state, self.v_prev,
+                                           method="exact", bounds=(low, high))
+        self.v_prev = v
+        return v, float(self.bank.offset + self.bank.weights @ self.state)
+
+
+class FamilyStepper:
+    """Any fitted family exposing ``initial_state(u0)``, ``step(u, state) -> (y, state)`` and
+    ``invert_step(y, state) -> (u, state)`` (the Bouc-Wen family does)."""
+
+    def __init__(self, model: Any) -> None:
+        for name in ("initial_state", "step", "invert_step"):
+            if not callable(getattr(model, name, None)):
+                raise HysteresisError(
+                    f"{type(model).__name__} has no {name}(); it cannot be stepped online"
+                )
+        self.model = model
+        self.reset(0.0)
+
+    def reset(self, u0: float) -> None:
+        self.state = self.model.initial_state(u0)
+
+    def inverse(self, target: float, *, low: float, high: float) -> tuple[float, float]:
+        prev = self.state
+        u, st = self.model.invert_step(target, prev)
+        u = float(u)
+        if not low <= u <= high or not math.isfinite(u):
+            u = min(max(u, low), high) if math.isfinite(u) else min(max(0.0, low), high)
+        y, self.state = self.model.step(u, prev)  # re-run: the state of the applied command
+        return u, float(y)
+
+
+def as_stepper(model: Any) -> InverseStepper:
+    """Wrap a :class:`PlayBank`, a stepper, or a step-able fitted family."""
+    if isinstance(model, PlayBank):
+        return PlayBankStepper(model)
+    if callable(getattr(model, "inverse", None)) and callable(getattr(model, "reset", None)):
+        return model  # type: ignore[no-any-return]
+    return FamilyStepper(model)
+
+
 def run_inverse_with_error_correction(
-    step: StepFn, desired: Any, bank: PlayBank, *, dt_s: float = 0.01,
+    step: StepFn, desired: Any, model: Any, *, dt_s: float = 0.01,
     camera: CameraModel | None = None, process_var: float = 1e-3, meas_var: float = 1e-2,
     output_key: str = "output", stroke: StrokeLimits | None = None, v0: float = 0.0,
-    correct: bool = True,
+    correct: bool = True, max_step: float | None = None,
 ) -> LoopResult:
-    """Our compensator: ``u_k = Gamma^{-1}(desired_k - f_hat)`` with the exact step inverse.
+    """Our compensator: ``u_k = M^{-1}(desired_k - f_hat)`` with a model's exact step inverse
+    (``model``: a :class:`PlayBank` - the Gamma operator - or any stepper/step-able family).
 
     ``f_hat`` is a random-walk Kalman estimate of the model's output error
-    ``f = measured - Gamma(u)``; each delivered measurement is compared with the model's own
+    ``f = measured - M(u)``; each delivered measurement is compared with the model's own
     prediction *at the measurement's capture time* (so the camera's latency does not enter the
     loop: the correction is open loop on the estimate, like seed 000's enhancement, and cannot
     destabilise the plant). ``correct=False`` is the plain exact-inverse feed-forward.
+    ``max_step`` bounds the command change per tick (default: unbounded but within the stroke).
     """
     _check_dt(dt_s)
     yd = as_1d(desired, "desired")
     lim = stroke or StrokeLimits()
     cam = _Camera(camera or CameraModel(rate_hz=None), dt_s)
+    stepper = as_stepper(model)
+    stepper.reset(v0)
     n = yd.size
     u = np.empty(n)
     y = np.empty(n)
     ymodel = np.empty(n)
     seen = np.full(n, np.nan)
     fh_log = np.empty(n)
-    state = bank.initial_state(v0)
     v_prev = v0
     f_hat, P = 0.0, 1.0
-    span = float(np.ptp(yd)) + 10.0 * float(np.max(bank.plays)) + 1.0
     for k in range(n):
         target = float(yd[k]) - (f_hat if correct else 0.0)
-        bounds = (max(lim.low, v_prev - span), min(lim.high, v_prev + span))
-        v, state = gamma_step_inverse(bank, target, state, v_prev, method="exact", bounds=bounds)
-        ymodel[k] = float(bank.offset + bank.weights @ state)
+        low, high = lim.low, lim.high
+        if max_step is not None:
+            low, high = max(low, v_prev - max_step), min(high, v_prev + max_step)
+        v, ymodel[k] = stepper.inverse(target, low=low, high=high)
         u[k] = v
         v_prev = v
         y[k] = _output(step(float(v)), output_key)
@@ -768,5 +834,5 @@ def run_inverse_with_error_correction(
             f_hat += gain * (val - ymodel[kc] - f_hat)
             P *= 1.0 - gain
         fh_log[k] = f_hat
-    return LoopResult("ours" if correct else "gamma_exact_ff", _ticks(n, dt_s), yd, u, y, seen,
+    return LoopResult("ours" if correct else "exact_ff", _ticks(n, dt_s), yd, u, y, seen,
                       {"model_output": ymodel, "f_hat": fh_log})

@@ -18,9 +18,11 @@ from hysteresis.compensation import (
     GAMMA_METHODS,
     CameraModel,
     CHParams,
+    FamilyStepper,
     PlayBank,
     StrokeLimits,
     _Camera,
+    as_stepper,
     ch_simulate,
     estimate_model_error,
     fit_coleman_hodgdon_ga,
@@ -282,3 +284,32 @@ def test_pd_and_ame_pd_are_stable_and_ame_pd_wins() -> None:
     assert reduction(s_pd["mean_abs_error"], s_ame["mean_abs_error"]) > 60.0
     assert s_ame["var_error"] < s_pd["var_error"]
     assert np.isfinite(ame.extra["f_h"][-1])
+
+
+class _LinearStepModel:
+    """A step-able family stand-in: y = 2 u (no memory)."""
+
+    def initial_state(self, u0: float = 0.0) -> dict[str, float]:
+        return {"u": u0}
+
+    def step(self, u: float, state: object = None) -> tuple[float, dict[str, float]]:
+        return 2.0 * u, {"u": u}
+
+    def invert_step(self, y: float, state: object = None) -> tuple[float, dict[str, float]]:
+        return y / 2.0, {"u": y / 2.0}
+
+
+def test_family_stepper_clips_and_reports_the_model_output_of_the_applied_command() -> None:
+    st = as_stepper(_LinearStepModel())
+    assert isinstance(st, FamilyStepper)
+    assert st.inverse(3.0, low=-1.0, high=1.0) == (1.0, 2.0)
+    assert st.inverse(1.0, low=-1.0, high=1.0) == (0.5, 1.0)
+    with pytest.raises(HysteresisError, match=r"object has no initial_state\(\)"):
+        as_stepper(object())
+    # Ours with a memoryless model on a memoryless plant of gain 3: the error estimate absorbs
+    # the gain mismatch as it moves slowly, and the output follows the slow desired ramp.
+    yd = np.linspace(0.0, 1.0, 2000)
+    res = run_inverse_with_error_correction(lambda u: {"output": 3.0 * u}, yd,
+                                            _LinearStepModel())
+    assert abs(res.error()[-1]) < 0.01
+    assert np.all(np.isfinite(res.extra["f_hat"]))
