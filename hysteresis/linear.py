@@ -1,0 +1,136 @@
+"""The no-hysteresis baseline: ``y(k) = gain * u(k - delay) + offset``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hysteresis.base import (
+    FloatArray,
+    HysteresisError,
+    HysteresisModel,
+    as_1d,
+    check_pair,
+    register_family,
+)
+
+
+@dataclass
+class LinearState:
+    """The last ``delay`` inputs (oldest first); empty without delay."""
+
+    history: FloatArray
+
+    def copy(self) -> LinearState:
+        return LinearState(self.history.copy())
+
+
+@register_family("linear")
+class LinearModel(HysteresisModel):
+    """Gain, offset and an optional pure delay in samples.
+
+    Parameters
+    ----------
+    delay:
+        Fixed delay in samples (used when ``max_delay`` is 0).
+    max_delay:
+        If > 0, ``fit`` picks the delay in ``0..max_delay`` with the smallest SSE.
+    """
+
+    def __init__(self, *, delay: int = 0, max_delay: int = 0) -> None:
+        self.delay = delay
+        self.max_delay = max_delay
+
+    def fit(self, u: Any, y: Any, **fit_params: Any) -> LinearModel:
+        """Least-squares gain and offset (and delay, if searched)."""
+        if fit_params:
+            raise HysteresisError(f"LinearModel.fit takes no extra arguments: {sorted(fit_params)}")
+        uu, yy = check_pair(u, y)
+        if int(self.delay) < 0 or int(self.max_delay) < 0:
+            raise HysteresisError(
+                f"delay and max_delay must be >= 0: {self.delay}, {self.max_delay}"
+            )
+        delays = range(int(self.max_delay) + 1) if int(self.max_delay) > 0 else [int(self.delay)]
+        best: tuple[float, int, float, float] | None = None
+        for d in delays:
+            if uu.size - d < 2:
+                break
+            x = uu[: uu.size - d]
+            t = yy[d:]
+            a = np.column_stack([x, np.ones(x.size)])
+            coef, *_ = np.linalg.lstsq(a, t, rcond=None)
+            # compare delays on the mean squared error over the samples each one explains
+            mse = float(np.mean((a @ coef - t) ** 2))
+            if best is None or mse < best[0]:
+                best = (mse, d, float(coef[0]), float(coef[1]))
+        if best is None:
+            raise HysteresisError(f"too few samples ({uu.size}) for delay {self.delay}")
+        _, d, gain, off = best
+        self.gain_ = gain
+        self.offset_ = off
+        self.delay_ = int(d)
+        y_hat = self.predict(uu)
+        self.sse_ = float(np.sum((y_hat - yy) ** 2))
+        return self
+
+    def initial_state(self, u0: float = 0.0) -> LinearState:
+        """Rest state: the input has been ``u0`` for ``delay_`` samples."""
+        self.check_fitted()
+        return LinearState(np.full(self.delay_, float(u0)))
+
+    def _state(self, state: Any, u0: float) -> LinearState:
+        if state is None:
+            return self.initial_state(u0)
+        st = state.copy() if isinstance(state, LinearState) else LinearState(
+            np.asarray(state, dtype=np.float64).reshape(-1).copy()
+        )
+        if st.history.size != self.delay_:
+            raise HysteresisError(
+                f"state holds {st.history.size} past inputs, the delay is {self.delay_}"
+            )
+        return st
+
+    def predict(self, u: Any, *, state: Any = None, return_state: bool = False) -> Any:
+        """Simulate; without a state the input is taken to have rested at ``u[0]``."""
+        self.check_fitted()
+        uu = as_1d(u, "u")
+        st = self._state(state, float(uu[0]))
+        full = np.concatenate([st.history, uu])
+        y = self.gain_ * full[: uu.size] + self.offset_
+        if return_state:
+            return y, LinearState(full[full.size - self.delay_ :].copy())
+        return y
+
+    def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, LinearState]:
+        y, st = self.predict(u, state=state, return_state=True)
+        return y, st
+
+    def invert(self, y_desired: Any, *, state: Any = None, return_state: bool = False) -> Any:
+        """``u(k) = (y(k + delay) - offset) / gain``; the last ``delay`` inputs hold the last value.
+
+        With a delay the first ``delay`` outputs depend only on the past (unreachable); with a
+        state given the returned state is the one :meth:`predict` would reach on ``u``.
+        """
+        self.check_fitted()
+        yd = as_1d(y_desired, "y_desired")
+        if self.gain_ == 0:
+            raise HysteresisError("linear model with zero gain has no inverse")
+        d = self.delay_
+        shifted = np.concatenate([yd[d:], np.full(min(d, yd.size), yd[-1])])[: yd.size]
+        u = (shifted - self.offset_) / self.gain_
+        if return_state:
+            _, st = self.predict(u, state=state, return_state=True)
+            return u, st
+        return u
+
+    def invert_step(self, y_k: float, state: Any = None) -> tuple[float, LinearState]:
+        """Causal static inverse ``(y_k - offset) / gain`` (a delay cannot be undone causally)."""
+        self.check_fitted()
+        if self.gain_ == 0:
+            raise HysteresisError("linear model with zero gain has no inverse")
+        v = (float(y_k) - self.offset_) / self.gain_
+        st = self._state(state, v)
+        hist = np.concatenate([st.history, [v]])[1:] if self.delay_ else st.history
+        return v, LinearState(hist)

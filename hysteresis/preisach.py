@@ -1,0 +1,381 @@
+"""Classical Preisach model of seed 001 (eq. 4.1-4.6) on a discretised Preisach plane.
+
+``y(k) = offset + sum_c mu(alpha_c, beta_c) dA_c r_c(k)`` over the cells ``alpha >= beta`` of a
+uniform ``n_levels`` grid spanning the identification input range (plus a margin). Each cell
+holds one relay hysteron ``r in [-1, 1]`` (eq. 4.1-4.2); by default (``smooth=True``) the relay
+switches along a linear ramp one grid step wide (a Krasnosel'skii-Pokrovskii kernel) so that the
+output is continuous in the input - the ideal relay is ``smooth=False``. See
+:mod:`hysteresis.play` for the kernel.
+
+Densities (``density=``), with ``a = alpha - centre``, ``b = beta - centre``:
+
+* ``"lorentzian"`` (eq. 4.4): ``N / ([1 + ((a - H0)/(s H0))^2] [1 + ((b + H0)/(s H0))^2])``;
+* ``"gauss_gauss"`` (eq. 4.5):
+  ``N exp(-((a-b)/2 - H0)^2 / (2 s^2 H0^2)) exp(-((a+b)/2)^2 / (2 s^2 H0^2))``;
+* ``"lognormal_gauss"`` (eq. 4.6):
+  ``N (2/(a-b)) exp(-ln((a-b)/(2 H0))^2 / (2 s^2)) exp(-(a+b)^2 / (8 s^2 H0^2))``
+  (the printed eq. 4.6 lost the square on the logarithm; the lognormal needs it);
+* ``"nonparametric"``: one non-negative weight per cell, by non-negative least squares.
+
+Parametric densities (``N, H0, s, centre`` and the offset) are identified by nonlinear least
+squares (``scipy.optimize.least_squares``, analytic-in-``N`` Jacobian through the fixed relay
+state matrix) from the best start of a small grid over ``(H0, s)``. The relay states depend only
+on the input, so they are computed once per fit (numba); ``fit_every`` keeps every n-th row of
+them for the least squares (the plane itself is advanced on every sample).
+
+Initial state: demagnetised about the first input ``u0`` (cells with ``(alpha+beta)/2 < u0`` up,
+the others down), the usual rest state of a mechanism that settled at ``u0``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.linalg import qr as scipy_qr
+from scipy.optimize import least_squares, nnls
+
+from hysteresis.base import (
+    FloatArray,
+    HysteresisError,
+    HysteresisModel,
+    as_1d,
+    check_pair,
+    register_family,
+)
+from hysteresis.play import (
+    relay_invert_sequence,
+    relay_invert_step,
+    relay_simulate,
+    relay_states,
+    relay_update,
+)
+
+DENSITIES = ("gauss_gauss", "lorentzian", "lognormal_gauss", "nonparametric")
+PARAM_NAMES = ("N", "H0", "sigma", "centre")
+
+
+@dataclass
+class PreisachState:
+    """Every hysteron's state ``r`` (cells in the order of ``alpha_``/``beta_``) and last input."""
+
+    r: FloatArray
+    u: float = 0.0
+
+    def copy(self) -> PreisachState:
+        return PreisachState(self.r.copy(), float(self.u))
+
+
+def density_shape(
+    kind: str, alpha: FloatArray, beta: FloatArray, h0: float, sigma: float, centre: float,
+    *, min_width: float, spread: float = 1.0,
+) -> FloatArray:
+    """Unscaled density ``mu / N`` at the cells; ``alpha - beta`` floored at ``min_width``.
+
+    ``spread`` multiplies the width ``s H0`` of the factor along ``alpha + beta`` (the
+    interaction axis) only; ``spread = 1`` is the paper's density.
+    """
+    a = alpha - centre
+    b = beta - centre
+    s = sigma * h0
+    sc = s * spread
+    if kind == "lorentzian":
+        # factorised: spread widens both factors' tails away from (H0, -H0) symmetrically
+        return 1.0 / ((1.0 + ((a - h0) / sc) ** 2) * (1.0 + ((b + h0) / sc) ** 2))
+    if kind == "gauss_gauss":
+        return np.exp(-(((a - b) / 2.0 - h0) ** 2) / (2.0 * s * s)) * np.exp(
+            -(((a + b) / 2.0) ** 2) / (2.0 * sc * sc)
+        )
+    if kind == "lognormal_gauss":
+        width = np.maximum(a - b, min_width)
+        return (2.0 / width) * np.exp(-(np.log(width / (2.0 * h0)) ** 2) / (2.0 * sigma**2)) * (
+            np.exp(-((a + b) ** 2) / (8.0 * sc * sc))
+        )
+    raise HysteresisError(f"density must be one of {DENSITIES}, got {kind!r}")
+
+
+@register_family("preisach")
+class PreisachModel(HysteresisModel):
+    """Relay hysterons on a discretised Preisach plane with a parametric or free density.
+
+    Parameters
+    ----------
+    density:
+        ``"gauss_gauss"`` (default), ``"lorentzian"``, ``"lognormal_gauss"`` or ``"nonparametric"``.
+    n_levels:
+        Grid levels per axis; the plane has ``n_levels (n_levels + 1) / 2`` cells.
+    margin:
+        Fraction of the identification input span added on both sides of the plane.
+    smooth:
+        Relays switch along a one-cell ramp (continuous output) instead of a jump.
+    fit_every:
+        Keep every n-th sample for the least squares (speed; the plane sees every sample).
+    max_nfev:
+        Function-evaluation budget of the nonlinear least squares.
+    inverse_xtol:
+        Input tolerance of the per-step inverse search, in input units.
+    free_spread:
+        Fit the width of the density along ``alpha + beta`` separately (``spread``); with
+        ``False`` the density is exactly the paper's (one width ``sigma H0`` for both axes).
+    reversible:
+        Add a reversible linear term ``gain * u`` (``gain >= 0``) to the relay sum.
+    """
+
+    def __init__(
+        self,
+        *,
+        density: str = "gauss_gauss",
+        n_levels: int = 24,
+        margin: float = 0.05,
+        smooth: bool = True,
+        fit_every: int = 4,
+        max_nfev: int = 200,
+        inverse_xtol: float = 1e-10,
+        free_spread: bool = True,
+        reversible: bool = True,
+    ) -> None:
+        self.density = density
+        self.n_levels = n_levels
+        self.margin = margin
+        self.smooth = smooth
+        self.fit_every = fit_every
+        self.max_nfev = max_nfev
+        self.inverse_xtol = inverse_xtol
+        self.free_spread = free_spread
+        self.reversible = reversible
+
+    # -- the plane --------------------------------------------------------------------
+    def _check_hyper(self) -> None:
+        if self.density not in DENSITIES:
+            raise HysteresisError(f"density must be one of {DENSITIES}, got {self.density!r}")
+        if int(self.n_levels) < 2:
+            raise HysteresisError(f"n_levels must be >= 2, got {self.n_levels}")
+        if not self.margin >= 0:
+            raise HysteresisError(f"margin must be >= 0, got {self.margin}")
+        if int(self.fit_every) < 1:
+            raise HysteresisError(f"fit_every must be >= 1, got {self.fit_every}")
+
+    def _set_plane(self, u: FloatArray) -> None:
+        lo, hi = float(u.min()), float(u.max())
+        span = hi - lo
+        if span <= 0:
+            raise HysteresisError("the input is constant; a Preisach plane needs an input range")
+        lo, hi = lo - self.margin * span, hi + self.margin * span
+        n = int(self.n_levels)
+        levels = np.linspace(lo, hi, n)
+        step = float(levels[1] - levels[0])
+        ii, jj = np.tril_indices(n)  # i >= j: alpha = levels[i] >= beta = levels[j]
+        self.levels_ = levels
+        self.alpha_ = np.ascontiguousarray(levels[ii])
+        self.beta_ = np.ascontiguousarray(levels[jj])
+        self.cell_area_ = np.where(ii == jj, 0.5 * step * step, step * step)
+        self.ramp_width_ = step if self.smooth else 0.0
+
+    def _shape(self, theta: FloatArray) -> FloatArray:
+        """Cell weights per unit ``N`` for ``theta = (N, H0, sigma, centre, spread)``."""
+        step = float(self.levels_[1] - self.levels_[0])
+        return density_shape(
+            self.density, self.alpha_, self.beta_, float(theta[1]), float(theta[2]),
+            float(theta[3]), min_width=step / 3.0, spread=float(theta[4]),
+        ) * self.cell_area_
+
+    def initial_state(self, u0: float = 0.0) -> PreisachState:
+        """Demagnetised about ``u0`` (see the module docstring)."""
+        self.check_fitted()
+        mid = 0.5 * (self.alpha_ + self.beta_)
+        r = np.where(mid < u0, 1.0, -1.0)
+        relay_update(float(u0), r, self.alpha_, self.beta_, float(self.ramp_width_))
+        return PreisachState(r, float(u0))
+
+    def _state(self, state: Any, u0: float) -> PreisachState:
+        if state is None:
+            return self.initial_state(u0)
+        st = state.copy() if isinstance(state, PreisachState) else PreisachState(
+            np.asarray(state, dtype=np.float64).copy(), u0
+        )
+        if st.r.shape != self.alpha_.shape:
+            raise HysteresisError(
+                f"state has {st.r.size} hysterons, the plane has {self.alpha_.size}"
+            )
+        return st
+
+    # -- identification ---------------------------------------------------------------
+    def fit(self, u: Any, y: Any, **fit_params: Any) -> PreisachModel:
+        """Identify the density (and offset) from one record, from the demagnetised state."""
+        if fit_params:
+            raise HysteresisError(f"PreisachModel.fit takes no extra args: {sorted(fit_params)}")
+        self._check_hyper()
+        uu, yy = check_pair(u, y)
+        self._set_plane(uu)
+        r0 = self.initial_state(float(uu[0])).r
+        every = int(self.fit_every)
+        rows, _ = relay_states(uu, self.alpha_, self.beta_, float(self.ramp_width_), r0, every)
+        target = yy[::every]
+        if self.density == "nonparametric":
+            self._fit_nonparametric(rows, target, uu[::every])
+        else:
+            self._fit_parametric(rows, target, uu)
+        self.sse_ = float(np.sum((self.predict(uu) - yy) ** 2))
+        return self
+
+    def _fit_nonparametric(self, rows: FloatArray, target: FloatArray, u_rows: FloatArray) -> None:
+        ones = np.ones((rows.shape[0], 1))
+        # the offset may have either sign: two non-negative columns +1 and -1
+        cols = [rows, ones, -ones]
+        if self.reversible:
+            cols.append(u_rows.reshape(-1, 1))
+        x, _ = nnls(np.hstack(cols), target, maxiter=50 * rows.shape[1])
+        k = rows.shape[1]
+        self.cell_weights_ = np.ascontiguousarray(x[:k])
+        self.offset_ = float(x[k] - x[k + 1])
+        self.reversible_gain_ = float(x[k + 2]) if self.reversible else 0.0
+        self.density_params_ = np.zeros(0)
+
+    def _fit_parametric(self, rows: FloatArray, target: FloatArray, u: FloatArray) -> None:
+        # x = (N, H0, sigma, centre, spread, offset, gain); N, offset, gain enter linearly.
+        half = 0.5 * float(u.max() - u.min())
+        centre0 = 0.5 * float(u.max() + u.min())
+        k = rows.shape[1]
+        u_rows = u[:: int(self.fit_every)]
+        # The residual is linear in (cell weights, offset, gain): one QR of [rows, 1, u] turns
+        # the n_rows-long least squares into an equivalent (K + 2)-long one (same minimiser).
+        # QR of the augmented matrix [rows, 1, u, target] (R only, no Q formed): its last column
+        # holds Q^T target; robust to rank deficiency (cells the record never switches).
+        aug = np.column_stack([rows, np.ones(rows.shape[0]), u_rows, target])
+        raug = scipy_qr(aug, mode="r", overwrite_a=True, check_finite=False)[0]
+        rmat, qt = raug[: k + 2, : k + 2], raug[: k + 2, k + 2]
+        r_cells, r_off, r_gain = rmat[:, :k], rmat[:, k], rmat[:, k + 1]
+        lin_cols = [r_off, r_gain] if self.reversible else [r_off]
+        spread_free = self.free_spread and self.density != "lorentzian"
+        # Start: coarse grid over (H0, sigma[, spread]) with the linear part solved exactly.
+        best: tuple[float, FloatArray] | None = None
+        spreads = (1.0, 4.0, 16.0) if spread_free else (1.0,)
+        for h0 in half * np.array([0.03, 0.08, 0.15, 0.3, 0.5]):
+            for sigma in (0.3, 0.6, 1.2):
+                for spread in spreads:
+                    theta = np.array([1.0, h0, sigma, centre0, spread])
+                    a = np.column_stack([r_cells @ self._shape(theta), *lin_cols])
+                    coef, *_ = np.linalg.lstsq(a, qt, rcond=None)
+                    if coef[0] <= 0:
+                        continue
+                    sse = float(np.sum((a @ coef - qt) ** 2))
+                    if best is None or sse < best[0]:
+                        gain = max(float(coef[2]), 0.0) if self.reversible else 0.0
+                        best = (sse, np.array([coef[0], h0, sigma, centre0, spread, coef[1], gain]))
+        if best is None:
+            raise HysteresisError(
+                "no positive density fits the data (is the output decreasing in the input?)"
+            )
+        free = [0, 1, 2, 3, 5]
+        if spread_free:
+            free.append(4)
+        if self.reversible:
+            free.append(6)
+        free.sort()
+        full0 = best[1]
+
+        def unpack(z: FloatArray) -> FloatArray:
+            x = full0.copy()
+            x[free] = z
+            return x
+
+        def resid(z: FloatArray) -> FloatArray:
+            x = unpack(z)
+            out: FloatArray = r_cells @ (x[0] * self._shape(x)) + x[5] * r_off + x[6] * r_gain
+            res_: FloatArray = out - qt
+            return res_
+
+        def jac(z: FloatArray) -> FloatArray:
+            x = unpack(z)
+            shp = self._shape(x)
+            dw = np.zeros((k, len(free)))
+            extra = np.zeros((qt.size, len(free)))
+            for col, j in enumerate(free):
+                if j == 0:
+                    dw[:, col] = shp
+                elif j == 5:
+                    extra[:, col] = r_off
+                elif j == 6:
+                    extra[:, col] = r_gain
+                else:  # central differences of the cheap K-vector, not of the residual
+                    dx = 1e-6 * max(abs(float(x[j])), 1e-3)
+                    xp, xm = x.copy(), x.copy()
+                    xp[j] += dx
+                    xm[j] -= dx
+                    dw[:, col] = x[0] * (self._shape(xp) - self._shape(xm)) / (2 * dx)
+            out: FloatArray = r_cells @ dw + extra
+            return out
+
+        span = 2.0 * half
+        lo_all = np.array([0.0, 1e-3 * half, 0.02, centre0 - span, 0.1, -np.inf, 0.0])
+        hi_all = np.array([np.inf, 2.0 * span, 20.0, centre0 + span, 100.0, np.inf, np.inf])
+        lo, hi = lo_all[free], hi_all[free]
+        z0 = np.clip(full0[free], lo + 1e-12, hi - 1e-12)
+        res = least_squares(
+            resid, z0, jac=jac, bounds=(lo, hi), x_scale="jac", max_nfev=int(self.max_nfev),
+            method="trf",
+        )
+        x = unpack(res.x)
+        self.density_params_ = np.ascontiguousarray(x[:5])
+        self.cell_weights_ = np.ascontiguousarray(x[0] * self._shape(x))
+        self.offset_ = float(x[5])
+        self.reversible_gain_ = float(x[6])
+        self.n_fev_ = int(res.nfev)
+
+    # -- simulation -------------------------------------------------------------------
+    def predict(self, u: Any, *, state: Any = None, return_state: bool = False) -> Any:
+        """Simulate from the demagnetised state at ``u[0]`` (or ``state``)."""
+        self.check_fitted()
+        uu = as_1d(u, "u")
+        st = self._state(state, float(uu[0]))
+        y, r = relay_simulate(
+            uu, self.alpha_, self.beta_, float(self.ramp_width_), self.cell_weights_,
+            self.offset_, self.reversible_gain_, st.r,
+        )
+        if return_state:
+            return y, PreisachState(r, float(uu[-1]))
+        return y
+
+    def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, PreisachState]:
+        y, st = self.predict(u, state=state, return_state=True)
+        return y, st
+
+    # -- inverse ----------------------------------------------------------------------
+    def _input_bounds(self) -> tuple[float, float]:
+        step = float(self.levels_[1] - self.levels_[0])
+        return float(self.levels_[0] - step), float(self.levels_[-1] + step)
+
+    def invert_step(self, y_k: float, state: Any = None) -> tuple[float, PreisachState]:
+        """One step of the per-step inverse search: ``(u_k, state_k)``."""
+        self.check_fitted()
+        st = self._state(state, 0.0)
+        lo, hi = self._input_bounds()
+        v = float(relay_invert_step(
+            float(y_k), st.r, self.alpha_, self.beta_, float(self.ramp_width_),
+            self.cell_weights_, self.offset_, self.reversible_gain_, st.u, lo, hi,
+            float(self.inverse_xtol),
+        ))
+        relay_update(v, st.r, self.alpha_, self.beta_, float(self.ramp_width_))
+        return v, PreisachState(st.r, v)
+
+    def invert(
+        self, y_desired: Any, *, state: Any = None, return_state: bool = False,
+        u0: float | None = None,
+    ) -> Any:
+        """Per-step inverse with the plane state carried (warm start at the previous input).
+
+        Without a state the plane starts demagnetised about ``u0`` (default: the middle of
+        the identification range, or 0 if that lies inside it).
+        """
+        self.check_fitted()
+        yd = as_1d(y_desired, "y_desired")
+        lo, hi = self._input_bounds()
+        if u0 is None:
+            u0 = 0.0 if lo < 0.0 < hi else 0.5 * (lo + hi)
+        st = self._state(state, float(u0))
+        u, r, v = relay_invert_sequence(
+            yd, self.alpha_, self.beta_, float(self.ramp_width_), self.cell_weights_,
+            self.offset_, self.reversible_gain_, st.r, st.u, lo, hi, float(self.inverse_xtol),
+        )
+        return (u, PreisachState(r, float(v))) if return_state else u
