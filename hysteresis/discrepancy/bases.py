@@ -1,0 +1,83 @@
+"""Two small base models used when no registered family is asked for.
+
+``PlaySumModel``: a free-weight sum of play operators plus an offset (the Gamma operator of
+seed 001 without the sum-to-one constraint), identified by bounded linear least squares.
+``AffineModel``: gain and offset, the no-hysteresis baseline. Neither is registered as a
+family: they exist so the discrepancy analysis can run (and be tested) on its own.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.optimize import nnls
+
+from hysteresis.base import HysteresisModel, as_1d, check_pair
+from hysteresis.discrepancy._ops import FloatArray, play
+
+
+class PlaySumModel(HysteresisModel):
+    """y = sum_i w_i play_{r_i}(u) + b, w_i >= 0, play state starting at u[0]."""
+
+    family = "play_sum"
+
+    def __init__(self, *, thresholds: tuple[float, ...] | None = None, n: int = 11,
+                 max_threshold: float | None = None) -> None:
+        self.thresholds = thresholds
+        self.n = n
+        self.max_threshold = max_threshold
+
+    def _r(self, u: FloatArray) -> FloatArray:
+        if self.thresholds is not None:
+            return np.asarray(self.thresholds, dtype=np.float64)
+        top = self.max_threshold
+        if top is None:
+            # A third of the input range reaches every backlash the rig can show.
+            top = max(float(np.ptp(u)) / 3.0, 1e-9)
+        return np.linspace(0.0, top, self.n)
+
+    def _design(self, u: FloatArray, r: FloatArray) -> FloatArray:
+        cols = [play(u, float(ri), z0=float(u[0])) for ri in r]
+        cols.append(np.ones_like(u))
+        return np.column_stack(cols)
+
+    def fit(self, u: Any, y: Any, **fit_params: Any) -> PlaySumModel:
+        uu, yy = check_pair(u, y)
+        r = self._r(uu)
+        a = self._design(uu, r)
+        # Non-negative weights (any gain: mm -> deg on a bending joint); the free offset is
+        # split into a positive and a negative part so that NNLS can carry it.
+        x, _ = nnls(np.column_stack([a, -a[:, -1]]), yy, maxiter=50 * a.shape[1])
+        self.thresholds_ = r
+        self.weights_ = np.asarray(x[: r.size], dtype=np.float64)
+        self.offset_ = float(x[r.size] - x[r.size + 1])
+        self.u0_ = float(uu[0])
+        return self
+
+    def predict(self, u: Any, *, state: Any = None) -> FloatArray:
+        self.check_fitted()
+        uu = as_1d(u, "u")
+        a = self._design(uu, self.thresholds_)
+        return np.asarray(a @ np.r_[self.weights_, self.offset_], dtype=np.float64)
+
+
+class AffineModel(HysteresisModel):
+    """y = a u + b (cannot represent any hysteresis, dead zone or backlash)."""
+
+    family = "affine"
+
+    def fit(self, u: Any, y: Any, **fit_params: Any) -> AffineModel:
+        uu, yy = check_pair(u, y)
+        a = np.column_stack([uu, np.ones_like(uu)])
+        coef = np.linalg.solve(a.T @ a, a.T @ yy)
+        self.gain_, self.offset_ = float(coef[0]), float(coef[1])
+        return self
+
+    def predict(self, u: Any, *, state: Any = None) -> FloatArray:
+        self.check_fitted()
+        uu = as_1d(u, "u")
+        return np.asarray(self.gain_ * uu + self.offset_, dtype=np.float64)
+
+
+LOCAL_BASES: dict[str, type[HysteresisModel]] = {"play_sum": PlaySumModel, "affine": AffineModel}

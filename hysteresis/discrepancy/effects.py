@@ -1,0 +1,367 @@
+"""The candidate library: one physical hypothesis per named effect of the virtual rig.
+
+Each candidate states the signature it leaves in the base model's residual and owns a model
+term that composes with any base family:
+
+* an *input-side* term transforms the input before the base sees it (``time_delay``,
+  ``dead_zone``): the base is refitted on the transformed input;
+* an *output-side* term adds features whose coefficients are fitted jointly with the base
+  (``rate_dependence``, ``tendon_elongation``, ``drift``, ``asymmetry``, ``saturation``).
+
+Terms with a nonlinear parameter ``theta`` (a delay, a width, a knee) are searched on a grid
+that is scaled to the identification run, then refined; their linear coefficients come from the
+joint fit. :class:`ComposedModel` is base family + terms, fitted jointly by backfitting.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from hysteresis.base import HysteresisError, HysteresisModel
+from hysteresis.discrepancy._ops import FloatArray, play, shift
+from hysteresis.discrepancy.runs import RunData
+
+EFFECT_NAMES = (
+    "rate_dependence", "tendon_elongation", "time_delay", "drift", "asymmetry",
+    "saturation", "dead_zone",
+)
+
+NO_THETA = float("nan")
+Ctx = dict[str, float]
+
+
+class Effect:
+    """A candidate effect: its name, its signature, and its composable model term."""
+
+    name: str = ""
+    signature: str = ""
+    term: str = ""
+    side: str = "output"  # "input" or "output"
+    n_linear: int = 0
+    has_theta: bool = False
+
+    def available(self, run: RunData) -> bool:
+        return True
+
+    @property
+    def n_params(self) -> int:
+        return self.n_linear + (1 if self.has_theta else 0)
+
+    def grid(self, ident: RunData) -> list[float]:
+        return [NO_THETA]
+
+    def context(self, ident: RunData) -> Ctx:
+        """Constants taken from the identification run and reused on every other run."""
+        return {}
+
+    def bounds(self, ident: RunData) -> tuple[float, float] | None:
+        g = [x for x in self.grid(ident) if np.isfinite(x)]
+        return (min(g), max(g)) if g else None
+
+    def transform_input(self, run: RunData, u: FloatArray, theta: float, ctx: Ctx) -> FloatArray:
+        return u
+
+    def features(
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+    ) -> FloatArray:
+        return np.empty((run.n, 0))
+
+    def describe(self) -> dict[str, str]:
+        return {"signature": self.signature, "term": self.term, "side": self.side}
+
+
+class RateDependence(Effect):
+    name = "rate_dependence"
+    signature = (
+        "velocity-dependent friction: loops widen with speed; residual opposes the motion while "
+        "the tendon slides, saturating with speed, larger on faster held-out runs"
+    )
+    term = "c * tanh(v(t) / v0) (v = smoothed input velocity, v0 on a grid)"
+    n_linear = 1
+    has_theta = True
+
+    def grid(self, ident: RunData) -> list[float]:
+        vmax = float(np.percentile(np.abs(ident.v), 99))
+        return [f * vmax for f in (0.1, 0.2, 0.35, 0.6, 1.0, 2.0)]
+
+    def features(
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+    ) -> FloatArray:
+        return np.tanh(run.v / theta)[:, None]
+
+
+class TendonElongation(Effect):
+    name = "tendon_elongation"
+    signature = (
+        "extra load-dependent compliance: output lag grows with tendon tension (quadratically), "
+        "largest at high tension and large amplitude, tensions themselves unchanged"
+    )
+    term = "c1 (T_in^2 - T_in(0)^2) + c2 (T_out^2 - T_out(0)^2) (measured tensions)"
+    n_linear = 2
+
+    def available(self, run: RunData) -> bool:
+        return run.tension is not None
+
+    def features(
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+    ) -> FloatArray:
+        if run.tension is None:
+            raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
+        scale = max(ctx.get("tension_scale", 1.0), 1e-12)
+        cols = [(run.tension**2 - run.tension[0] ** 2) / scale]
+        t_out = run.tension_out if run.tension_out is not None else np.zeros(run.n)
+        cols.append((t_out**2 - t_out[0] ** 2) / scale)
+        return np.column_stack(cols)
+
+    def context(self, ident: RunData) -> Ctx:
+        t = ident.tension if ident.tension is not None else np.ones(1)
+        return {"tension_scale": float(np.max(t**2))}
+
+
+class TimeDelay(Effect):
+    name = "time_delay"
+    signature = (
+        "latency of the output: residual cross-correlates with the input velocity at a non-zero "
+        "lag, concentrated where the output moves fastest"
+    )
+    term = "y(t) = base(u(t - tau)), tau >= 0"
+    side = "input"
+    has_theta = True
+
+    def grid(self, ident: RunData) -> list[float]:
+        dt = ident.dt
+        return [k * dt for k in (1, 2, 3, 5, 8, 12, 18, 27, 40) if k * dt <= 0.5]
+
+    def transform_input(self, run: RunData, u: FloatArray, theta: float, ctx: Ctx) -> FloatArray:
+        return shift(run.t, u, theta)
+
+
+class Drift(Effect):
+    name = "drift"
+    signature = (
+        "slow creep or thermal offset of the output: residual trends with time since the start, "
+        "the same in every phase and at every amplitude"
+    )
+    term = "c * (1 - exp(-t / tau)) (t = time since the start of the run, tau on a grid)"
+    n_linear = 1
+    has_theta = True
+
+    def grid(self, ident: RunData) -> list[float]:
+        dur = float(ident.ts[-1])
+        return [f * dur for f in (0.25, 0.5, 0.75, 1.0, 1.5, 3.0, 10.0)]
+
+    def features(
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+    ) -> FloatArray:
+        return (1.0 - np.exp(-run.ts / theta))[:, None]
+
+
+class Asymmetry(Effect):
+    name = "asymmetry"
+    signature = (
+        "direction-dependent friction: the loop is off-centre, mean residual differs between "
+        "loading and unloading by a constant"
+    )
+    term = "c * s(t), s = direction of the last motion (+1 loading, -1 unloading)"
+    n_linear = 1
+
+    def features(
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+    ) -> FloatArray:
+        return run.s[:, None]
+
+
+class Saturation(Effect):
+    name = "saturation"
+    signature = (
+        "stiffening or a stop near the end of stroke: residual only at the largest outputs, "
+        "clipping the loop tips, absent at small amplitude"
+    )
+    term = ("-c1 relu(y_base - y_hi) - c2 relu(y_lo - y_base); knees y_hi/y_lo at a fraction of "
+            "the identification half-range about its centre (grid); c = 1 is a hard stop")
+    n_linear = 2
+    has_theta = True
+
+    def grid(self, ident: RunData) -> list[float]:
+        return [0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95]
+
+    def features(
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+    ) -> FloatArray:
+        hi = ctx["centre"] + theta * ctx["half"]
+        lo = ctx["centre"] - theta * ctx["half"]
+        return np.column_stack([np.maximum(y_base - hi, 0.0), np.maximum(lo - y_base, 0.0)])
+
+    def context(self, ident: RunData) -> Ctx:
+        return {"centre": 0.5 * float(ident.y.max() + ident.y.min()),
+                "half": 0.5 * float(np.ptp(ident.y))}
+
+
+class DeadZone(Effect):
+    name = "dead_zone"
+    signature = (
+        "actuator-side backlash: after every reversal the output stays put for a fixed input "
+        "travel; residual concentrated just after reversals, same size at every amplitude"
+    )
+    term = "y = base(play_{d/2}(u)), d = dead-zone width"
+    side = "input"
+    has_theta = True
+
+    def grid(self, ident: RunData) -> list[float]:
+        span = float(np.ptp(ident.u))
+        return [f * span for f in (0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15)]
+
+    def transform_input(self, run: RunData, u: FloatArray, theta: float, ctx: Ctx) -> FloatArray:
+        return play(u, 0.5 * theta, z0=float(u[0]))
+
+
+CANDIDATES: dict[str, Effect] = {
+    e.name: e
+    for e in (RateDependence(), TendonElongation(), TimeDelay(), Drift(), Asymmetry(),
+              Saturation(), DeadZone())
+}
+assert tuple(CANDIDATES) == EFFECT_NAMES
+
+
+def candidate(name: str) -> Effect:
+    try:
+        return CANDIDATES[name]
+    except KeyError:
+        raise HysteresisError(f"unknown effect {name!r}; known: {', '.join(EFFECT_NAMES)}") from None
+
+
+# -- composition -----------------------------------------------------------------------
+
+BaseFactory = Callable[[], HysteresisModel]
+
+
+@dataclass(frozen=True)
+class Term:
+    """An effect with its nonlinear parameter and its identification-run constants."""
+
+    effect: Effect
+    theta: float = NO_THETA
+    ctx: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def context(self) -> Ctx:
+        return dict(self.ctx)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.effect.name,
+                "theta": None if not np.isfinite(self.theta) else float(self.theta),
+                "context": self.context}
+
+
+class ComposedModel:
+    """Base family + effect terms, fitted jointly on one run.
+
+    Input-side terms transform the input (in order); the base is fitted on the transformed
+    input. Output-side terms add features whose coefficients are fitted jointly with the base
+    by backfitting (alternate: base on ``y - g``, coefficients on ``y - base``), which converges
+    to the joint least-squares solution for bases that are themselves least-squares fits.
+    """
+
+    def __init__(self, base_factory: BaseFactory, terms: Sequence[Term] = (), *,
+                 iterations: int = 8, tol: float = 1e-5) -> None:
+        self.base_factory = base_factory
+        self.terms = tuple(terms)
+        self.iterations = iterations
+        self.tol = tol
+
+    def _input(self, run: RunData) -> FloatArray:
+        u = run.u
+        for term in self.terms:
+            if term.effect.side == "input":
+                u = term.effect.transform_input(run, u, term.theta, term.context)
+        return u
+
+    def _features(self, run: RunData, y_base: FloatArray) -> FloatArray:
+        cols = [t.effect.features(run, t.theta, y_base, t.context)
+                for t in self.terms if t.effect.n_linear > 0]
+        return np.hstack(cols) if cols else np.empty((run.n, 0))
+
+    def fit(self, run: RunData) -> ComposedModel:
+        u = self._input(run)
+        y = run.y
+        base = self.base_factory()
+        base.fit(u, y)
+        yb = base.predict(u)
+        coef = np.zeros(0)
+        if any(t.effect.n_linear > 0 for t in self.terms):
+            prev = np.inf
+            for _ in range(self.iterations):
+                phi = self._features(run, yb)
+                coef = _lstsq(phi, y - yb)
+                g = phi @ coef
+                base = self.base_factory()
+                base.fit(u, y - g)
+                yb = base.predict(u)
+                sse = float(np.sum((y - yb - self._features(run, yb) @ coef) ** 2))
+                if prev - sse <= self.tol * max(prev, 1e-300):
+                    break
+                prev = sse
+            phi = self._features(run, yb)
+            coef = _lstsq(phi, y - yb)
+        self.base_ = base
+        self.coef_ = np.asarray(coef, dtype=np.float64)
+        return self
+
+    def predict(self, run: RunData) -> FloatArray:
+        if not hasattr(self, "base_"):
+            raise HysteresisError("ComposedModel is not fitted yet; call fit(run) first")
+        u = self._input(run)
+        yb = self.base_.predict(u)
+        if self.coef_.size:
+            yb = yb + self._features(run, yb) @ self.coef_
+        return np.asarray(yb, dtype=np.float64)
+
+    @property
+    def n_params(self) -> int:
+        return sum(t.effect.n_params for t in self.terms)
+
+
+def _lstsq(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Least squares through the (tiny) normal equations: a few columns, many rows."""
+    ata = a.T @ a
+    ridge = 1e-12 * float(np.trace(ata)) + 1e-300
+    return np.asarray(np.linalg.solve(ata + ridge * np.eye(a.shape[1]), a.T @ b), dtype=np.float64)
+
+
+def _sse(model: ComposedModel, run: RunData) -> float:
+    return float(np.sum((run.y - model.predict(run)) ** 2))
+
+
+def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect,
+                    ident: RunData, *, refine: bool = True,
+                    iterations: int = 8) -> ComposedModel:
+    """Add ``effect`` to ``fixed`` terms and fit jointly on ``ident``.
+
+    The effect's nonlinear parameter is chosen by a grid search on the identification SSE,
+    refined by a bounded scalar search between the grid neighbours of the best point.
+    """
+    ctx = tuple(sorted(effect.context(ident).items()))
+
+    def build(theta: float) -> ComposedModel:
+        m = ComposedModel(base_factory, [*fixed, Term(effect, theta, ctx)], iterations=iterations)
+        return m.fit(ident)
+
+    grid = effect.grid(ident)
+    fits = [build(th) for th in grid]
+    sses = [_sse(m, ident) for m in fits]
+    best = int(np.argmin(sses))
+    model = fits[best]
+    if refine and effect.has_theta and len(grid) > 1:
+        lo = grid[max(best - 1, 0)]
+        hi = grid[min(best + 1, len(grid) - 1)]
+        if hi > lo:
+            res = minimize_scalar(lambda th: _sse(build(float(th)), ident), bounds=(lo, hi),
+                                  method="bounded", options={"maxiter": 10, "xatol": 1e-3 * (hi - lo)})
+            if float(res.fun) < sses[best]:
+                model = build(float(res.x))
+    return model

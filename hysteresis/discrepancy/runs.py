@@ -1,0 +1,108 @@
+"""The arrays of one run as the discrepancy analysis sees them (no files, no pandas needed)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from hysteresis.base import HysteresisError, as_1d
+from hysteresis.discrepancy._ops import FloatArray, direction, velocity
+
+ROLES = ("identification", "heldout")
+
+
+@dataclass(eq=False)
+class RunData:
+    """One run: time, input, measured output, optional tensions (input/output end), and labels.
+
+    ``config`` is the configuration key (e.g. ``{"curve_angle_deg": 90, "radius_mm": 30}``);
+    runs with equal ``config`` share one fitted model. ``role`` says whether the run is used to
+    identify (``identification``) or to judge (``heldout``).
+    """
+
+    run_id: str
+    t: FloatArray
+    u: FloatArray
+    y: FloatArray
+    tension: FloatArray | None = None
+    tension_out: FloatArray | None = None
+    config: dict[str, Any] = field(default_factory=dict)
+    excitation: str = ""
+    role: str = "identification"
+
+    def __post_init__(self) -> None:
+        self.t = as_1d(self.t, f"{self.run_id}: t")
+        self.u = as_1d(self.u, f"{self.run_id}: input")
+        self.y = as_1d(self.y, f"{self.run_id}: output")
+        if not (self.t.size == self.u.size == self.y.size):
+            raise HysteresisError(
+                f"run {self.run_id}: t, input and output differ in length "
+                f"({self.t.size}, {self.u.size}, {self.y.size})"
+            )
+        if self.t.size < 20:
+            raise HysteresisError(f"run {self.run_id}: only {self.t.size} samples (need >= 20)")
+        if np.any(np.diff(self.t) <= 0):
+            raise HysteresisError(f"run {self.run_id}: time is not strictly increasing")
+        if self.tension is not None:
+            self.tension = as_1d(self.tension, f"{self.run_id}: tension")
+            if self.tension.size != self.t.size:
+                raise HysteresisError(f"run {self.run_id}: tension length differs from t")
+        if self.tension_out is not None:
+            self.tension_out = as_1d(self.tension_out, f"{self.run_id}: tension_out")
+            if self.tension_out.size != self.t.size:
+                raise HysteresisError(f"run {self.run_id}: tension_out length differs from t")
+        if self.role not in ROLES:
+            raise HysteresisError(f"run {self.run_id}: role must be one of {ROLES}, got {self.role!r}")
+
+    @property
+    def n(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def dt(self) -> float:
+        return float(np.median(np.diff(self.t)))
+
+    @property
+    def config_key(self) -> str:
+        if not self.config:
+            return "default"
+        return ",".join(f"{k}={self.config[k]}" for k in sorted(self.config))
+
+    @cached_property
+    def ts(self) -> FloatArray:
+        """Time since the start of the run, s."""
+        return np.asarray(self.t - self.t[0], dtype=np.float64)
+
+    @cached_property
+    def v(self) -> FloatArray:
+        """Smoothed input velocity."""
+        return velocity(self.t, self.u)
+
+    @cached_property
+    def v_eps(self) -> float:
+        """Speed below which the input counts as still (2 % of the 99th-percentile speed)."""
+        return max(0.02 * float(np.percentile(np.abs(self.v), 99)), 1e-12)
+
+    @cached_property
+    def s(self) -> FloatArray:
+        """Direction of the last motion (+1 loading, -1 unloading; held through dwells)."""
+        return direction(self.v, eps=self.v_eps)
+
+    def decimated(self, factor: int) -> RunData:
+        """Every ``factor``-th sample after a moving-average anti-alias filter."""
+        if factor <= 1:
+            return self
+        from hysteresis.discrepancy._ops import smooth
+
+        def dec(x: FloatArray) -> FloatArray:
+            return np.asarray(smooth(x, factor)[::factor], dtype=np.float64)
+
+        return RunData(
+            run_id=self.run_id, t=self.t[::factor].copy(), u=dec(self.u), y=dec(self.y),
+            tension=None if self.tension is None else dec(self.tension),
+            tension_out=None if self.tension_out is None else dec(self.tension_out),
+            config=dict(self.config), excitation=self.excitation, role=self.role,
+        )

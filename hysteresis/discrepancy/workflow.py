@@ -1,0 +1,383 @@
+"""Locate -> name -> add -> show, repeated until no candidate beats the noise.
+
+The base family is fitted per configuration on its identification run and judged on that
+configuration's held-out runs. Each round:
+
+1. **locate**: residual analysis of the current model on every run (:mod:`.locate`);
+2. **name**: every remaining candidate's term is added in turn, refitted jointly on the
+   identification run, and scored by the held-out error it removes, penalised by the Bayesian
+   information criterion (BIC) with an effective sample size from the residual's correlation
+   time, so that a term fitting noise or structure that does not generalise loses;
+3. **add**: the winner (if it clears the gain and BIC thresholds and improves most held-out
+   runs) joins the model, keeping its parameters per configuration;
+4. **show**: RMSE before/after on identification and held-out runs, recorded per effect.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from hysteresis.base import HysteresisError, HysteresisModel
+from hysteresis.discrepancy._ops import FloatArray
+from hysteresis.discrepancy.effects import (
+    CANDIDATES,
+    EFFECT_NAMES,
+    BaseFactory,
+    ComposedModel,
+    Effect,
+    Term,
+    fit_with_effect,
+)
+from hysteresis.discrepancy.locate import autocorrelation, locate
+from hysteresis.discrepancy.runs import RunData
+
+
+@dataclass
+class WorkflowSettings:
+    """Knobs of the workflow (defaults are what the tests and the pipeline use)."""
+
+    candidates: tuple[str, ...] = EFFECT_NAMES
+    max_effects: int = 3
+    #: A candidate must remove at least this fraction of the held-out RMSE ...
+    min_relative_gain: float = 0.2
+    #: ... lower the held-out BIC by at least this much ...
+    max_delta_bic: float = -10.0
+    #: ... and improve at least this fraction of the held-out runs.
+    min_runs_improved: float = 0.5
+    #: Stop when the held-out RMSE is within this factor of the measurement-noise floor.
+    noise_factor: float = 2.0
+    progress: bool = False
+
+
+@dataclass
+class Group:
+    """One configuration: its identification run and held-out runs."""
+
+    key: str
+    ident: RunData
+    heldout: list[RunData]
+
+
+def group_runs(runs: Sequence[RunData]) -> list[Group]:
+    """Runs grouped by configuration; each group needs one identification and >= 1 held-out run."""
+    by: dict[str, list[RunData]] = {}
+    for r in runs:
+        by.setdefault(r.config_key, []).append(r)
+    groups = []
+    for key, rs in by.items():
+        ident = [r for r in rs if r.role == "identification"]
+        held = [r for r in rs if r.role == "heldout"]
+        if len(ident) != 1:
+            raise HysteresisError(
+                f"configuration {key}: need exactly one identification run, got {len(ident)} "
+                f"({', '.join(r.run_id for r in ident) or 'none'})"
+            )
+        if not held:
+            raise HysteresisError(f"configuration {key}: no held-out run to judge on")
+        groups.append(Group(key, ident[0], held))
+    if not groups:
+        raise HysteresisError("no runs given")
+    return groups
+
+
+def effective_n(residual: FloatArray) -> float:
+    """Sample size corrected for correlation: N / (lag where the autocorrelation drops below 1/e)."""
+    n = residual.size
+    acf = autocorrelation(residual, min(n - 1, 2000))
+    below = np.flatnonzero(acf < np.exp(-1.0))
+    tau = int(below[0]) if below.size else n
+    return float(max(n / max(tau, 1), 2.0))
+
+
+def _rmse(e: FloatArray) -> float:
+    return float(np.sqrt(np.mean(e**2)))
+
+
+@dataclass
+class Evaluation:
+    """Predictions of a set of per-configuration models on all runs."""
+
+    ident_pred: dict[str, FloatArray] = field(default_factory=dict)
+    held_pred: dict[str, FloatArray] = field(default_factory=dict)
+
+    def errors(self, groups: Sequence[Group]) -> tuple[FloatArray, FloatArray]:
+        e_id = np.concatenate([g.ident.y - self.ident_pred[g.ident.run_id] for g in groups])
+        e_h = np.concatenate([r.y - self.held_pred[r.run_id] for g in groups for r in g.heldout])
+        return e_id, e_h
+
+    def per_run_rmse(self, groups: Sequence[Group]) -> dict[str, float]:
+        return {r.run_id: _rmse(r.y - self.held_pred[r.run_id]) for g in groups for r in g.heldout}
+
+
+def evaluate(models: dict[str, ComposedModel], groups: Sequence[Group]) -> Evaluation:
+    ev = Evaluation()
+    for g in groups:
+        m = models[g.key]
+        ev.ident_pred[g.ident.run_id] = m.predict(g.ident)
+        for r in g.heldout:
+            ev.held_pred[r.run_id] = m.predict(r)
+    return ev
+
+
+def fit_models(base_factory: BaseFactory, groups: Sequence[Group],
+               terms: dict[str, list[Term]]) -> dict[str, ComposedModel]:
+    return {g.key: ComposedModel(base_factory, terms.get(g.key, [])).fit(g.ident) for g in groups}
+
+
+def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[Group],
+                    terms: dict[str, list[Term]], before: Evaluation,
+                    n_eff: float) -> dict[str, Any]:
+    """Add ``effect`` to every configuration's model, refit, and measure what it removes."""
+    models = {g.key: fit_with_effect(base_factory, terms.get(g.key, []), effect, g.ident)
+              for g in groups}
+    after = evaluate(models, groups)
+    e_id0, e_h0 = before.errors(groups)
+    e_id1, e_h1 = after.errors(groups)
+    h0, h1 = _rmse(e_h0), _rmse(e_h1)
+    k = effect.n_params * len(groups)
+    d_bic = n_eff * float(np.log(max(h1, 1e-300) ** 2 / max(h0, 1e-300) ** 2)) + k * np.log(n_eff)
+    r0, r1 = before.per_run_rmse(groups), after.per_run_rmse(groups)
+    improved = float(np.mean([r1[k_] < r0[k_] for k_ in r0]))
+    # SINDy-style evidence: how much of the held-out residual the term's contribution explains.
+    delta = np.concatenate([after.held_pred[r.run_id] - before.held_pred[r.run_id]
+                            for g in groups for r in g.heldout])
+    den = float(np.dot(delta, delta))
+    explained = float(np.dot(e_h0, delta) ** 2 / (den * float(np.dot(e_h0, e_h0)))) if den > 0 else 0.0
+    params = {}
+    for g in groups:
+        term = models[g.key].terms[-1]
+        coef = models[g.key].coef_
+        params[g.key] = {**term.to_dict(), "coefficients": [float(c) for c in coef]}
+    return {
+        "name": effect.name,
+        "models": models,
+        "after": after,
+        "rmse_before": _rmse(e_id0),
+        "rmse_after": _rmse(e_id1),
+        "heldout_rmse_before": h0,
+        "heldout_rmse_after": h1,
+        "relative_gain": 1.0 - h1 / h0 if h0 > 0 else 0.0,
+        "delta_bic": float(d_bic),
+        "n_eff": n_eff,
+        "n_params": k,
+        "runs_improved": improved,
+        "residual_explained": explained,
+        "heldout_per_run": {rid: {"before": r0[rid], "after": r1[rid]} for rid in r0},
+        "parameters": params,
+    }
+
+
+def _accept(s: dict[str, Any], st: WorkflowSettings) -> bool:
+    return bool(s["relative_gain"] >= st.min_relative_gain and s["delta_bic"] <= st.max_delta_bic
+                and s["runs_improved"] >= st.min_runs_improved)
+
+
+def _compact_locate(loc: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in loc.items() if k != "noise_floor_per_run"}
+
+
+def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str], *,
+                strength: float = 0.1, tol: float = 0.3) -> dict[str, float]:
+    """How much of each effect the plain base family absorbs on its own.
+
+    The base's own prediction is distorted by the effect's term at a moderate strength
+    (input-side: the middle of its parameter grid; output-side: features scaled to
+    ``strength`` x the output's standard deviation); the plain base is refitted to the distorted
+    signal. Returns the remaining fraction of the distortion (near 0: within the base's reach).
+    """
+    base = base_factory().fit(ident.u, ident.y)
+    y0 = base.predict(ident.u)
+    out: dict[str, float] = {}
+    for name in names:
+        eff = CANDIDATES[name]
+        if not eff.available(ident):
+            continue
+        grid = eff.grid(ident)
+        theta = grid[len(grid) // 2]
+        ctx = eff.context(ident)
+        u = eff.transform_input(ident, ident.u, theta, ctx) if eff.side == "input" else ident.u
+        y_syn = base.predict(u)
+        if eff.n_linear:
+            phi = eff.features(ident, theta, y_syn, ctx)
+            contrib = phi @ np.ones(phi.shape[1])
+            sd = float(np.std(contrib))
+            if sd > 0:
+                y_syn = y_syn + contrib * (strength * float(np.std(y0)) / sd)
+        dist = _rmse(y_syn - y0)
+        if dist == 0:
+            continue
+        refit = base_factory().fit(ident.u, y_syn)
+        out[name] = _rmse(y_syn - refit.predict(ident.u)) / dist
+    return out
+
+
+def run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_name: str,
+                 settings: WorkflowSettings | None = None,
+                 model_error: dict[str, FloatArray] | None = None) -> dict[str, Any]:
+    """The whole workflow; returns the report dict (plus ``_models``/``_evaluations`` for plots).
+
+    ``model_error`` optionally maps identification run ids to a model-error signal (the UKF's
+    f_h of seed 000); it is regressed on each winner's term as extra evidence.
+    """
+    st = settings or WorkflowSettings()
+    groups = group_runs(runs)
+    for name in st.candidates:
+        if name not in CANDIDATES:
+            raise HysteresisError(f"unknown candidate {name!r}; known: {', '.join(EFFECT_NAMES)}")
+    terms: dict[str, list[Term]] = {g.key: [] for g in groups}
+    models = fit_models(base_factory, groups, terms)
+    current = evaluate(models, groups)
+    all_runs = [r for g in groups for r in (g.ident, *g.heldout)]
+    reach = reach_check(base_factory, groups[0].ident, st.candidates)
+    within = sorted(k for k, v in reach.items() if v < 0.3)
+    effects: list[dict[str, Any]] = []
+    located: list[dict[str, Any]] = []
+    rankings: list[list[dict[str, Any]]] = []
+    evaluations = [current]
+    remaining = [n for n in st.candidates if all(CANDIDATES[n].available(r) for r in all_runs)]
+    skipped = [n for n in st.candidates if n not in remaining]
+    for round_ in range(st.max_effects + 1):
+        preds = [current.ident_pred.get(r.run_id, current.held_pred.get(r.run_id)) for r in all_runs]
+        loc = locate(all_runs, [p for p in preds if p is not None])
+        model_name = "+".join([base_name, *[e["name"] for e in effects]])
+        located.append({"round": round_, "model": model_name, **_compact_locate(loc)})
+        _, e_h = current.errors(groups)
+        if round_ == st.max_effects or not remaining:
+            break
+        if _rmse(e_h) <= st.noise_factor * loc["noise_floor"]:
+            break
+        n_eff = float(sum(effective_n(r.y - current.held_pred[r.run_id])
+                          for g in groups for r in g.heldout))
+        scores = []
+        it = tqdm(remaining, desc=f"round {round_}: candidates", disable=not st.progress)
+        for name in it:
+            scores.append(score_candidate(CANDIDATES[name], base_factory, groups, terms, current, n_eff))
+        scores.sort(key=lambda s: s["delta_bic"])
+        rankings.append([_public(s) for s in scores])
+        winner = next((s for s in scores if _accept(s, st)), None)
+        if winner is None:
+            break
+        eff = CANDIDATES[winner["name"]]
+        evidence = {
+            "signature": eff.signature,
+            "term": eff.term,
+            "relative_gain": winner["relative_gain"],
+            "delta_bic": winner["delta_bic"],
+            "n_eff": winner["n_eff"],
+            "n_params": winner["n_params"],
+            "runs_improved": winner["runs_improved"],
+            "residual_explained": winner["residual_explained"],
+            "heldout_per_run": winner["heldout_per_run"],
+            "parameters": winner["parameters"],
+            "runner_up": next((
+                {"name": s["name"], "delta_bic": s["delta_bic"], "relative_gain": s["relative_gain"]}
+                for s in scores if s is not winner), None),
+            "located_before": _signature_stats(loc),
+        }
+        if model_error:
+            evidence["model_error_regression"] = _regress_model_error(
+                model_error, groups, current, winner["after"])
+        effects.append({
+            "name": winner["name"],
+            "evidence": evidence,
+            "rmse_before": winner["rmse_before"],
+            "rmse_after": winner["rmse_after"],
+            "heldout_rmse_before": winner["heldout_rmse_before"],
+            "heldout_rmse_after": winner["heldout_rmse_after"],
+        })
+        for g in groups:
+            terms[g.key] = list(winner["models"][g.key].terms)
+        models = winner["models"]
+        current = winner["after"]
+        evaluations.append(current)
+        remaining.remove(winner["name"])
+    e_id0, e_h0 = evaluations[0].errors(groups)
+    e_id1, e_h1 = current.errors(groups)
+    report: dict[str, Any] = {
+        "base_family": base_name,
+        "verdict": "missing_effects_found" if effects else "no_missing_effect",
+        "effects": effects,
+        "located": located,
+        "within_base_reach": within,
+        "within_base_reach_note": (
+            f"{', '.join(within)} {'is' if len(within) == 1 else 'are'} already within the "
+            f"{base_name} family's reach (the plain family absorbs that term's distortion), so "
+            "it cannot be found missing from it" if within else
+            f"no candidate is within the {base_name} family's reach"),
+        "reach_remaining_fraction": reach,
+        "candidates_skipped": {n: "needs a channel the runs do not carry (tension)" for n in skipped},
+        "rankings": rankings,
+        "summary": {
+            "configurations": [g.key for g in groups],
+            "identification_runs": [g.ident.run_id for g in groups],
+            "heldout_runs": [r.run_id for g in groups for r in g.heldout],
+            "rmse_before": _rmse(e_id0), "rmse_after": _rmse(e_id1),
+            "heldout_rmse_before": _rmse(e_h0), "heldout_rmse_after": _rmse(e_h1),
+            "heldout_reduction": 1.0 - _rmse(e_h1) / _rmse(e_h0) if _rmse(e_h0) > 0 else 0.0,
+        },
+    }
+    report["_models"] = models
+    report["_evaluations"] = evaluations
+    report["_groups"] = groups
+    return report
+
+
+def _public(s: dict[str, Any]) -> dict[str, Any]:
+    keys = ("name", "relative_gain", "delta_bic", "rmse_before", "rmse_after",
+            "heldout_rmse_before", "heldout_rmse_after", "runs_improved", "residual_explained")
+    return {k: s[k] for k in keys}
+
+
+def _signature_stats(loc: dict[str, Any]) -> dict[str, Any]:
+    b = loc["breakdown"]
+    return {
+        "noise_floor": loc["noise_floor"],
+        "rmse_over_noise": loc["rmse_over_noise"],
+        "phase_rmse": {k: v["rmse"] for k, v in b["phase"].items()},
+        "phase_mean": {k: v["mean"] for k, v in b["phase"].items()},
+        "velocity_rmse": {k: v["rmse"] for k, v in b["velocity"].items()},
+        "amplitude_rmse": {k: v["rmse"] for k, v in b["amplitude"].items()},
+        "time_mean": {k: v["mean"] for k, v in b["time"].items()},
+    }
+
+
+def _regress_model_error(model_error: dict[str, FloatArray], groups: Sequence[Group],
+                         before: Evaluation, after: Evaluation) -> dict[str, Any]:
+    """Regress the model-error rate f_h on the winner term's rate contribution (SINDy-style)."""
+    out: dict[str, Any] = {}
+    for g in groups:
+        f = model_error.get(g.ident.run_id)
+        if f is None or f.size != g.ident.n:
+            continue
+        contrib = after.ident_pred[g.ident.run_id] - before.ident_pred[g.ident.run_id]
+        x = np.gradient(contrib, g.ident.t)
+        den = float(np.dot(x, x))
+        if den == 0:
+            continue
+        c = float(np.dot(f, x) / den)
+        ss = float(np.sum((f - np.mean(f)) ** 2))
+        r2 = 1.0 - float(np.sum((f - c * x) ** 2)) / ss if ss > 0 else float("nan")
+        out[g.ident.run_id] = {"coefficient": c, "r2": r2}
+    return out
+
+
+def strip_private(report: dict[str, Any]) -> dict[str, Any]:
+    """The JSON-able report (drops the fitted objects kept for plotting)."""
+    return {k: v for k, v in report.items() if not k.startswith("_")}
+
+
+def base_factory_for(name: str, **params: Any) -> Callable[[], HysteresisModel]:
+    """Factory for a registered family or one of the local bases (``play_sum``, ``affine``)."""
+    from hysteresis.base import make_family
+    from hysteresis.discrepancy.bases import LOCAL_BASES
+
+    if name in LOCAL_BASES:
+        cls = LOCAL_BASES[name]
+        return lambda: cls(**params)
+    make_family(name, **params)  # fail early on an unknown family or bad parameter
+    return lambda: make_family(name, **params)
