@@ -26,7 +26,8 @@ def _row(i: int, rows: bool) -> int | None:
 
 
 def check_timestamps(t_ns: npt.NDArray[np.int64], *, run: str, file: str,
-                     check_gaps: bool = True, rows: bool = True) -> None:
+                     check_gaps: bool = True, rows: bool = True,
+                     max_gap_periods: float = MAX_GAP_PERIODS) -> None:
     """Timestamps strictly increase and have no gap longer than 10 sample periods."""
     if t_ns.size == 0:
         raise RigIOError("no samples", run=run, file=file)
@@ -39,12 +40,12 @@ def check_timestamps(t_ns: npt.NDArray[np.int64], *, run: str, file: str,
                          run=run, file=file, row=_row(i, rows), t_ns=int(t_ns[i]))
     if check_gaps and dt.size >= 2:
         period = float(np.median(dt))
-        gaps = np.flatnonzero(dt > MAX_GAP_PERIODS * period)
+        gaps = np.flatnonzero(dt > max_gap_periods * period)
         if gaps.size:
             i = int(gaps[0])
             raise RigIOError(
                 f"gap of {dt[i] / 1e6:.1f} ms after this sample is longer than "
-                f"{MAX_GAP_PERIODS:g} sample periods ({period / 1e6:.2f} ms)",
+                f"{max_gap_periods:g} sample periods ({period / 1e6:.2f} ms)",
                 run=run, file=file, row=_row(i, rows), t_ns=int(t_ns[i]))
 
 
@@ -89,14 +90,16 @@ def check_confident(frame: pd.DataFrame, *, run: str, file: str) -> None:
                          "(every frame has confidence 0 or no value)", run=run, file=file)
 
 
-def check_physical_run(run: PhysicalRun, *, rows: bool = False) -> None:
+def check_physical_run(run: PhysicalRun, *, rows: bool = False,
+                       max_gap_periods: float = MAX_GAP_PERIODS) -> None:
     """The value checks on a calibrated run (bags and importers; rows are not lines there)."""
     run_id = run.run_id
     for name in ("encoder", "loadcell", "camera", "tracker", "events"):
         frame = getattr(run, name)
         if frame is not None:
             check_timestamps(frame["t_ns"].to_numpy(dtype=np.int64), run=run_id,
-                             file=run.file(name), check_gaps=name != "events", rows=rows)
+                             file=run.file(name), check_gaps=name != "events", rows=rows,
+                             max_gap_periods=max_gap_periods)
     if run.loadcell is not None:
         cells = run.manifest.get("channels", {}).get("loadcell") or {}
         t = run.loadcell["t_ns"].to_numpy(dtype=np.int64)

@@ -1,0 +1,170 @@
+"""Stage ``ingest``: raw rig runs (folders, bags, foreign logs) -> validated parquet dataset.
+
+    python -m pipelines.ingest                # data/raw/virtual -> data/processed/virtual
+    python -m pipelines.ingest source=<dir> out=<dir>
+    python -m pipelines.ingest importer=tendon_catheter \\
+        source=/work/shared/real-data/tendon-catheter out=data/processed/catheter
+
+Every run is read, checked, calibrated, synchronised and normalised by the pure functions of
+``rig_io``; a bad run is rejected with its reason while the others go through. A run whose
+source files, ingest version and options are unchanged is not processed again. Writes
+``<out>/samples/<run_id>.parquet``, ``<out>/runs.json`` and ``<out>/ingest_report.json``
+(all atomically; never anything in the source folder) and exits 1 when a run was rejected.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import time
+from dataclasses import asdict
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from rig_io.atomic import write_text_atomic
+from rig_io.dataset import REPORT, SAMPLES, read_runs, run_file, write_run_rows, write_runs
+from rig_io.errors import RigIOError
+from rig_io.importer import IMPORTER_VERSION, load_mapping
+from rig_io.process import INGEST_VERSION, process_run
+from rig_io.sources import Source, discover, hash_files, load
+from rig_io.synchronise import SyncOptions
+
+
+def options_hash(sync: SyncOptions, mapping: dict[str, Any] | None) -> str:
+    """Hash of everything besides the source files that changes a run's rows."""
+    doc = {"sync": asdict(sync), "mapping": mapping, "importer": IMPORTER_VERSION}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def run_ingest(source: str | Path, out: str | Path, *, mapping: dict[str, Any] | None = None,
+               sync: SyncOptions | None = None, force: bool = False, prune: bool = True,
+               progress: bool = True) -> dict[str, Any]:
+    """Ingest every run under ``source`` into ``out``; return the report (also written)."""
+    started = time.perf_counter()
+    src, dst = Path(source).resolve(), Path(out).resolve()
+    if dst == src or src in dst.parents:
+        raise RigIOError("the output folder must not be inside the source folder "
+                         "(raw runs are never written)", file=str(dst))
+    sync = sync or SyncOptions()
+    mapping = load_mapping(mapping) if mapping is not None else None
+    opts = options_hash(sync, mapping)
+    sources = discover(src, mapping=mapping)
+    old = read_runs(dst)
+    by_key = {str(m.get("source_key")): (rid, m) for rid, m in old.items()}
+    runs: dict[str, dict[str, Any]] = {}
+    accepted: list[dict[str, Any]] = []
+    rejected: list[dict[str, Any]] = []
+    bar = tqdm(sources, desc="ingest", unit="run", disable=not progress, file=sys.stderr)
+    for s in bar:
+        key = s.key(src)
+        bar.set_postfix_str(key[-40:])
+        try:
+            digest, hashes = hash_files(s.files, root=src)
+        except OSError as err:
+            rejected.append(_rejection(s, key, RigIOError(f"unreadable: {err}",
+                                                          file=str(s.path))))
+            continue
+        cached = by_key.get(key)
+        if (not force and cached is not None and cached[1].get("source_hash") == digest
+                and cached[1].get("ingest_version") == INGEST_VERSION
+                and cached[1].get("options_hash") == opts
+                and run_file(dst, cached[0]).is_file() and cached[0] not in runs):
+            runs[cached[0]] = cached[1]
+            accepted.append({"run_id": cached[0], "source": key, "status": "unchanged",
+                             "n_samples": cached[1].get("n_samples")})
+            continue
+        try:
+            phys = load(s, mapping=mapping)
+            if phys.run_id in runs:
+                raise RigIOError(f"duplicate run_id: already ingested from "
+                                 f"{runs[phys.run_id]['source_key']!r}", run=phys.run_id,
+                                 file=str(s.path))
+            frame, info = process_run(phys, sync=sync)
+            meta = {**info, "source_key": key, "source_kind": s.kind, "source_path": str(s.path),
+                    "source_hash": digest, "source_files": hashes, "manifest": phys.manifest,
+                    "options_hash": opts, "sync_options": asdict(sync),
+                    "ingested_at": datetime.now(UTC).isoformat(timespec="seconds")}
+            write_run_rows(dst, frame, meta)
+        except RigIOError as err:
+            rejected.append(_rejection(s, key, err))
+            continue
+        except Exception as err:  # one broken run must not stop the batch
+            rejected.append(_rejection(s, key, RigIOError(
+                f"unexpected {type(err).__name__}: {err}", file=str(s.path))))
+            continue
+        runs[phys.run_id] = meta
+        accepted.append({"run_id": phys.run_id, "source": key, "status": "processed",
+                         "n_samples": meta["n_samples"]})
+    removed = _prune(dst, runs) if prune else []
+    write_runs(dst, runs)
+    report = {
+        "source": str(src), "out": str(dst), "ingest_version": INGEST_VERSION,
+        "options_hash": opts, "finished_at": datetime.now(UTC).isoformat(timespec="seconds"),
+        "elapsed_s": round(time.perf_counter() - started, 3),
+        "n_sources": len(sources), "n_accepted": len(accepted), "n_rejected": len(rejected),
+        "n_processed": sum(a["status"] == "processed" for a in accepted),
+        "n_samples": int(sum(int(runs[a["run_id"]]["n_samples"]) for a in accepted)),
+        "accepted": accepted, "rejected": rejected, "removed": removed,
+    }
+    write_text_atomic(dst / REPORT, json.dumps(report, indent=1, default=str) + "\n")
+    return report
+
+
+def _rejection(s: Source, key: str, err: RigIOError) -> dict[str, Any]:
+    return {"source": key, "run_id": err.run, "file": err.file, "row": err.row,
+            "t_ns": err.t_ns, "reason": str(err)}
+
+
+def _prune(dst: Path, runs: dict[str, dict[str, Any]]) -> list[str]:
+    """Remove output files of runs that are no longer accepted (ours, never raw data)."""
+    removed = []
+    folder = dst / SAMPLES
+    if folder.is_dir():
+        for f in sorted(folder.glob("*.parquet")):
+            if f.stem not in runs:
+                f.unlink()
+                removed.append(f.stem)
+    return removed
+
+
+def _main() -> None:
+    import hydra
+    from omegaconf import DictConfig, OmegaConf
+
+    @hydra.main(config_path="../conf", config_name="ingest", version_base="1.3")
+    def main(cfg: DictConfig) -> None:
+        from hydra.utils import to_absolute_path
+
+        mapping: dict[str, Any] | None = None
+        if cfg.get("importer") is not None:
+            loaded = OmegaConf.to_container(cfg.importer, resolve=True)
+            assert isinstance(loaded, dict)
+            mapping = {str(k): v for k, v in loaded.items()}
+        sync_cfg = OmegaConf.to_container(cfg.sync, resolve=True)
+        assert isinstance(sync_cfg, dict)
+        sync = SyncOptions(**{str(k): v for k, v in sync_cfg.items()})
+        try:
+            report = run_ingest(to_absolute_path(str(cfg.source)),
+                                to_absolute_path(str(cfg.out)), mapping=mapping, sync=sync,
+                                force=bool(cfg.force), prune=bool(cfg.prune),
+                                progress=bool(cfg.progress))
+        except RigIOError as err:
+            print(f"ingest: {err}", file=sys.stderr)
+            raise SystemExit(2) from None
+        print(f"ingest: {report['n_accepted']} accepted ({report['n_processed']} processed), "
+              f"{report['n_rejected']} rejected, {report['n_samples']} samples in "
+              f"{report['elapsed_s']:.1f} s -> {report['out']}", file=sys.stderr)
+        for r in report["rejected"]:
+            print(f"  rejected {r['source']}: {r['reason']}", file=sys.stderr)
+        if report["n_rejected"]:
+            raise SystemExit(1)
+
+    main()
+
+
+if __name__ == "__main__":
+    _main()

@@ -1,0 +1,101 @@
+"""The processed dataset on disk: one parquet file per run plus a JSON index of the runs.
+
+Layout of an ingest output folder ``<out>/``::
+
+    samples/<run_id>.parquet   the rows of one run (schema: rig_io.schema, docs/dataset-schema.md)
+    runs.json                  per-run metadata: manifest, source file hashes, ingest version,
+                               camera latency used and how, units, offsets, ...
+    ingest_report.json         accepted and rejected runs of the last ingest, with reasons
+
+``pandas.read_parquet(<out>/samples)`` reads every run as one table (all files share one arrow
+schema); :func:`read_dataset` does that and validates the result.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from rig_io.atomic import atomic_path, write_text_atomic
+from rig_io.errors import RigIOError
+from rig_io.schema import ARROW_SCHEMA, COLUMNS, SCHEMA_VERSION, validate
+
+SAMPLES = "samples"
+RUNS = "runs.json"
+REPORT = "ingest_report.json"
+#: Key of the run metadata in each parquet file's key-value metadata.
+META_KEY = b"tsm_run"
+
+
+def run_file(out: str | os.PathLike[str], run_id: str) -> Path:
+    return Path(out) / SAMPLES / f"{run_id}.parquet"
+
+
+def write_run_rows(out: str | os.PathLike[str], frame: pd.DataFrame,
+                   meta: dict[str, Any]) -> Path:
+    """Validate (write edge) and write one run's rows atomically, metadata embedded."""
+    run_id = str(meta["run_id"])
+    frame = validate(frame, where="write", run=run_id)
+    table = pa.Table.from_pandas(frame, schema=ARROW_SCHEMA, preserve_index=False)
+    table = table.replace_schema_metadata({META_KEY: json.dumps(meta, default=str).encode()})
+    target = run_file(out, run_id)
+    with atomic_path(target, suffix=".parquet") as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+    return target
+
+
+def read_dataset(path: str | os.PathLike[str], *, runs: list[str] | None = None,
+                 validate_rows: bool = True) -> pd.DataFrame:
+    """All rows of a processed dataset (an ingest output folder, its ``samples`` folder or
+    one parquet file), ordered by run then time, validated at the read edge."""
+    p = Path(path)
+    if p.is_dir() and (p / SAMPLES).is_dir():
+        p = p / SAMPLES
+    if p.is_dir():
+        files = sorted(p.glob("*.parquet"))
+        if runs is not None:
+            wanted = set(runs)
+            files = [f for f in files if f.stem in wanted]
+        if not files:
+            raise RigIOError("no runs in dataset", file=str(p))
+    elif p.is_file():
+        files = [p]
+    else:
+        raise RigIOError("dataset does not exist", file=str(p))
+    try:
+        tables = [pq.read_table(f, schema=ARROW_SCHEMA) for f in files]
+    except (OSError, pa.ArrowException) as err:
+        raise RigIOError(f"unreadable dataset: {err}", file=str(p)) from None
+    frame = pa.concat_tables(tables).to_pandas()
+    frame = frame.loc[:, list(COLUMNS)]
+    for col in ("run_id", "rig", "excitation"):
+        frame[col] = frame[col].astype("str")
+    if validate_rows:
+        frame = validate(frame, where="read")
+    return frame.reset_index(drop=True)
+
+
+def read_runs(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
+    """Per-run metadata of an ingest output folder (``runs.json``), keyed by run id."""
+    p = Path(path)
+    file = p / RUNS if p.is_dir() else p
+    if not file.is_file():
+        return {}
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as err:
+        raise RigIOError(f"unreadable run index: {err}", file=str(file)) from None
+    runs = data.get("runs", {})
+    return dict(runs) if isinstance(runs, dict) else {}
+
+
+def write_runs(out: str | os.PathLike[str], runs: dict[str, dict[str, Any]]) -> Path:
+    """Write the run index atomically."""
+    doc = {"schema_version": SCHEMA_VERSION, "runs": dict(sorted(runs.items()))}
+    return write_text_atomic(Path(out) / RUNS, json.dumps(doc, indent=1, default=str) + "\n")
