@@ -195,6 +195,14 @@ class GammaModel(HysteresisModel):
         y, st = self.predict(u, state=state, return_state=True)
         return y, st
 
+    def step(self, u_k: float, state: Any = None) -> tuple[float, GammaState]:
+        """One forward step: ``(y_k, state_k)`` from ``u_k`` and ``state_{k-1}`` (not modified)."""
+        self.check_fitted()
+        st = self._state(state)
+        v = float(u_k)
+        w = np.minimum(v, np.maximum(v - self.thresholds_, st.w))
+        return self.offset_ + float(self.weights_ @ w), GammaState(w, v)
+
     # -- inverse ----------------------------------------------------------------------
     def invert_step(
         self, y_k: float, state: Any = None, *, method: str | None = None
@@ -304,3 +312,16 @@ def sine_decay(
     t = np.arange(per_amp) / rate_hz
     s = np.sin(2.0 * np.pi * frequency_hz * t)
     return np.concatenate([a * s for a in amplitudes])
+
+
+def triangle_decay(
+    *, amplitudes: tuple[float, ...] = (6.0, 4.5, 3.0, 1.5), periods_per_amplitude: int = 3,
+    slope: float = 6.0, rate_hz: float = 100.0,
+) -> FloatArray:
+    """Seed 001's triangular validation input (Fig. 4.9a) from rest: constant ``slope`` per s."""
+    parts = [np.zeros(1)]
+    for a in amplitudes:
+        quarter = np.minimum(np.arange(1, int(round(a / slope * rate_hz)) + 1) * slope / rate_hz, a)
+        period = np.concatenate([quarter, a - quarter, -quarter, quarter - a])
+        parts.append(np.tile(period, periods_per_amplitude))
+    return np.concatenate(parts)

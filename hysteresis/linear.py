@@ -107,6 +107,11 @@ class LinearModel(HysteresisModel):
         y, st = self.predict(u, state=state, return_state=True)
         return y, st
 
+    def step(self, u_k: float, state: Any = None) -> tuple[float, LinearState]:
+        """One forward step: ``(y_k, state_k)``."""
+        y, st = self.predict(np.array([float(u_k)]), state=state, return_state=True)
+        return float(y[0]), st
+
     def invert(self, y_desired: Any, *, state: Any = None, return_state: bool = False) -> Any:
         """``u(k) = (y(k + delay) - offset) / gain``; the last ``delay`` inputs hold the last value.
 

@@ -341,6 +341,11 @@ class PreisachModel(HysteresisModel):
         y, st = self.predict(u, state=state, return_state=True)
         return y, st
 
+    def step(self, u_k: float, state: Any = None) -> tuple[float, PreisachState]:
+        """One forward step: ``(y_k, state_k)`` from ``u_k`` and ``state_{k-1}`` (not modified)."""
+        y, st = self.predict(np.array([float(u_k)]), state=state, return_state=True)
+        return float(y[0]), st
+
     # -- inverse ----------------------------------------------------------------------
     def _input_bounds(self) -> tuple[float, float]:
         step = float(self.levels_[1] - self.levels_[0])
