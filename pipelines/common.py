@@ -1,0 +1,98 @@
+"""Small I/O helpers shared by the stage entry points (paths, dataset, Hydra context)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from pipelines import cache
+from pipelines.stages import PipelineError
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+CONF_DIR = REPO_ROOT / "conf"
+
+
+@dataclass(frozen=True)
+class Paths:
+    root: Path
+    raw: Path
+    processed: Path
+    interim: Path
+    models: Path
+    predictions: Path
+    reports: Path
+
+    @classmethod
+    def from_config(cls, paths: Mapping[str, Any]) -> Paths:
+        def p(key: str) -> Path:
+            return Path(os.path.expanduser(str(paths[key]))).resolve()
+
+        return cls(**{k: p(k) for k in cls.__dataclass_fields__})
+
+    @property
+    def metrics_parquet(self) -> Path:
+        return self.reports / "metrics.parquet"
+
+    @property
+    def metrics_csv(self) -> Path:
+        return self.reports / "metrics.csv"
+
+
+def to_container(cfg: Any) -> dict[str, Any]:
+    """A DictConfig (or plain mapping) as a resolved plain dict, without the ``hydra`` node."""
+    from omegaconf import DictConfig, OmegaConf
+
+    if isinstance(cfg, DictConfig):
+        data = OmegaConf.to_container(cfg, resolve=True)
+    else:
+        data = dict(cfg)
+    assert isinstance(data, dict)
+    data.pop("hydra", None)
+    return {str(k): v for k, v in data.items()}
+
+
+def read_processed(path: Path) -> pd.DataFrame:
+    """The processed dataset: ``rig_io.dataset.read_dataset`` (validated) when available."""
+    if not path.exists():
+        raise PipelineError(
+            f"processed dataset {path} does not exist; run `make ingest` (or `make pipeline`)"
+        )
+    try:
+        from rig_io.dataset import read_dataset
+    except ImportError:  # ingest not landed yet: plain parquet
+        return pd.read_parquet(path)
+    return read_dataset(path)
+
+
+def dataset_hash(path: Path) -> str:
+    """Content hash of the processed dataset (file contents, not times)."""
+    return cache.hash_path(path) if path.exists() else "missing"
+
+
+def hydra_output_dir() -> Path | None:
+    """The running Hydra job's output folder (holds ``.hydra``), or None outside Hydra."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        return Path(HydraConfig.get().runtime.output_dir)
+    except Exception:  # noqa: BLE001 - not inside a Hydra app
+        return None
+
+
+def hydra_sweep_dir() -> Path | None:
+    """The sweep folder when running as a multirun job, else None."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        from hydra.types import RunMode
+
+        hc = HydraConfig.get()
+        if hc.mode == RunMode.MULTIRUN:
+            return Path(hc.sweep.dir)
+    except Exception:  # noqa: BLE001
+        return None
+    return None

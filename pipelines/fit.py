@@ -1,0 +1,296 @@
+"""Stage ``fit``: every model family x every configuration, identified on the
+identification excitation (default ``sine_decay``) of the processed dataset.
+
+    python -m pipelines.fit
+    python -m pipelines.fit family=gamma config.curve_angle_deg=90
+    python -m pipelines.fit -m family=gamma,bouc_wen config.curve_angle_deg=15,90
+
+Fitted models are written as JSON to ``${paths.models}/<family>/<configuration>__<kind>.json``
+(with the content key that produced them); a model whose data, configuration and family code
+are unchanged is read back instead of being fitted again.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import hydra
+import pandas as pd
+
+from pipelines import cache, stages
+from pipelines.common import (
+    CONF_DIR,
+    Paths,
+    dataset_hash,
+    hydra_output_dir,
+    hydra_sweep_dir,
+    read_processed,
+    to_container,
+)
+from pipelines.stages import FamilySpec, FitTask, PipelineError
+from rig_io.atomic import write_text_atomic
+
+log = logging.getLogger(__name__)
+MODEL_FILE_FORMAT = "tsm-fitted-model/1"
+
+
+# --------------------------------------------------------------------------------------
+# families from config
+# --------------------------------------------------------------------------------------
+
+
+def instantiate_family(config: Mapping[str, Any]) -> Any:
+    """Hydra ``instantiate`` of a family config (``_target_`` + hyper-parameters)."""
+    from hydra.utils import instantiate
+
+    from hysteresis.base import HysteresisModel
+
+    model = instantiate(dict(config), _convert_="all")
+    if not isinstance(model, HysteresisModel):
+        raise PipelineError(f"{config.get('_target_')!r} is not a HysteresisModel")
+    return model
+
+
+def _target_class(target: str) -> type:
+    from hydra.utils import get_class
+
+    return get_class(target)
+
+
+def family_file_config(name: str, *, conf_dir: Path = CONF_DIR) -> dict[str, Any]:
+    """``conf/family/<name>.yaml`` as a dict; the registered class alone if there is none."""
+    from omegaconf import OmegaConf
+
+    path = conf_dir / "family" / f"{name}.yaml"
+    if path.is_file():
+        data = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+        assert isinstance(data, dict)
+        data.pop("defaults", None)
+        if "_target_" in data:
+            return {str(k): v for k, v in data.items()}
+    from hysteresis.base import family_class
+
+    cls = family_class(name)
+    return {"_target_": f"{cls.__module__}.{cls.__qualname__}"}
+
+
+def family_specs(cfg: Mapping[str, Any], *, conf_dir: Path = CONF_DIR) -> list[FamilySpec]:
+    """The families this invocation fits.
+
+    A selected ``family`` group (``family=gamma``) gives exactly that family with its
+    (possibly overridden) hyper-parameters; otherwise every name in ``families``
+    (``all`` = :func:`hysteresis.family_names`), each from ``conf/family/<name>.yaml`` with
+    ``family_overrides.<name>`` merged on top.
+    """
+    selected = cfg.get("family")
+    if selected:
+        fam = dict(selected)
+        if "_target_" not in fam:
+            raise PipelineError(f"family config has no _target_: {fam}")
+        cls = _target_class(str(fam["_target_"]))
+        name = str(getattr(cls, "family", cls.__name__))
+        return [FamilySpec(name, fam, instantiate_family, cache.source_hash(cls))]
+    wanted = cfg.get("families", "all")
+    if wanted in (None, "all"):
+        from hysteresis.base import family_names
+
+        names = family_names()
+    else:
+        names = [str(n) for n in ([wanted] if isinstance(wanted, str) else wanted)]
+    overrides = cfg.get("family_overrides") or {}
+    specs = []
+    for name in names:
+        fam = family_file_config(name, conf_dir=conf_dir)
+        fam.update(dict(overrides.get(name) or {}))
+        cls = _target_class(str(fam["_target_"]))
+        specs.append(FamilySpec(name, fam, instantiate_family, cache.source_hash(cls)))
+    if not specs:
+        raise PipelineError("no model family registered or selected")
+    return specs
+
+
+# --------------------------------------------------------------------------------------
+# model files
+# --------------------------------------------------------------------------------------
+
+
+def model_path(models_dir: Path, row: Mapping[str, Any]) -> Path:
+    config = stages.Configuration(str(row["rig"]), stages._num(row["curve_angle_deg"]),
+                                  stages._num(row["radius_mm"]))
+    return models_dir / str(row["family"]) / f"{config.label}__{row['fit_excitation']}.json"
+
+
+def save_models(fits: pd.DataFrame, models_dir: Path) -> list[Path]:
+    """Write every freshly fitted row (``cached`` False) as one JSON file, atomically."""
+    written = []
+    for row in fits[~fits["cached"]].to_dict("records"):
+        record = {
+            "format": MODEL_FILE_FORMAT,
+            **{k: _plain(v) for k, v in row.items() if k not in ("model_json", "cached")},
+            "model": json.loads(row["model_json"]) if row.get("model_json") else None,
+        }
+        path = model_path(models_dir, row)
+        write_text_atomic(path, json.dumps(record, indent=1, allow_nan=True))
+        written.append(path)
+    return written
+
+
+def load_models(models_dir: Path) -> pd.DataFrame:
+    """Every model file under ``models_dir`` as a fits table (``cached`` True)."""
+    rows = []
+    for path in sorted(models_dir.glob("*/*.json")) if models_dir.is_dir() else []:
+        try:
+            record = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            log.warning("ignoring unreadable model file %s: %s", path, exc)
+            continue
+        if record.get("format") != MODEL_FILE_FORMAT:
+            continue
+        model = record.pop("model", None)
+        row = {c: record.get(c) for c in stages.FIT_COLUMNS}
+        row["model_json"] = json.dumps(model) if model is not None else None
+        row["cached"] = True
+        rows.append(row)
+    return stages.fits_frame(rows)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, float) and value != value:
+        return None
+    if hasattr(value, "item"):
+        return value.item()
+    return value
+
+
+# --------------------------------------------------------------------------------------
+# the stage
+# --------------------------------------------------------------------------------------
+
+
+def joblib_runner(n_jobs: int, *, progress: bool) -> Callable[..., list[dict[str, Any]]]:
+    """Map ``fit_task`` over tasks with joblib processes (a tqdm bar as results come back)."""
+
+    def run(fn: Callable[[FitTask], dict[str, Any]],
+            tasks: Sequence[FitTask]) -> list[dict[str, Any]]:
+        if n_jobs == 1 or len(tasks) == 1:
+            items = tasks
+            if progress:
+                from tqdm import tqdm
+
+                items = tqdm(tasks, desc="fit", unit="model")
+            return [fn(t) for t in items]
+        from joblib import Parallel, delayed
+
+        # Slow families first, so the last task to start is a quick one.
+        order = sorted(range(len(tasks)), key=lambda i: _expected_cost(tasks[i]), reverse=True)
+        par = Parallel(n_jobs=n_jobs, return_as="generator", batch_size=1)
+        gen = par(delayed(fn)(tasks[i]) for i in order)
+        if progress:
+            from tqdm import tqdm
+
+            gen = tqdm(gen, total=len(tasks), desc="fit", unit="model")
+        results = list(gen)
+        out: list[dict[str, Any]] = [{}] * len(tasks)
+        for i, r in zip(order, results, strict=True):
+            out[i] = r
+        return out
+
+    return run
+
+
+_COST_HINT = {"coleman_hodgdon": 4, "bouc_wen": 3, "preisach": 2, "gamma": 1, "linear": 0}
+
+
+def _expected_cost(task: FitTask) -> int:
+    return _COST_HINT.get(task.family.name, 2)
+
+
+def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Hydra-free core of the stage: config (plain mapping) in, fits table out.
+
+    Reads the processed dataset (unless given), fits what is not cached, writes model files.
+    """
+    paths = Paths.from_config(cfg["paths"])
+    if dataset is None:
+        dataset = read_processed(paths.processed)
+    sig = cfg.get("signals") or {}
+    input_col, output_col = str(sig.get("input", "input")), str(sig.get("output", "output"))
+    sel = cfg.get("config") or {}
+    configs = stages.configurations(dataset, rig=sel.get("rig"),
+                                    curve_angle_deg=sel.get("curve_angle_deg"),
+                                    radius_mm=sel.get("radius_mm"))
+    tasks = stages.plan_fits(dataset, family_specs(cfg), configs,
+                             fit_excitations=list(cfg.get("fit_excitations", ["sine_decay"])),
+                             input_col=input_col, output_col=output_col)
+    previous = load_models(paths.models) if cfg.get("cache", True) else None
+    progress = bool(cfg.get("progress", False))
+    n_jobs = int(cfg.get("n_jobs", 1))
+    if hydra_sweep_dir() is not None:
+        n_jobs = 1  # the multirun launcher already runs jobs in parallel
+    start = time.perf_counter()
+    fits = stages.fit_models(tasks, previous=previous,
+                             runner=joblib_runner(n_jobs, progress=progress))
+    save_models(fits, paths.models)
+    fresh = int((~fits["cached"]).sum())
+    log.info("fit: %d models (%d fitted, %d cached) in %.1f s", len(fits), fresh,
+             len(fits) - fresh, time.perf_counter() - start)
+    for row in fits[fits["error"].notna()].to_dict("records"):
+        log.warning("fit failed: %s %s phi=%s r=%s: %s", row["family"], row["rig"],
+                    row["curve_angle_deg"], row["radius_mm"], row["error"])
+    return fits
+
+
+def fit_metrics(fits: pd.DataFrame, dataset: pd.DataFrame, cfg: Mapping[str, Any]
+                ) -> pd.DataFrame:
+    """In-sample metrics (split ``fit``) of the given fits, for the stage's own MLflow runs."""
+    sig = cfg.get("signals") or {}
+    frames = []
+    for _, group in fits.groupby(["rig", "curve_angle_deg", "radius_mm"], dropna=False):
+        first = group.iloc[0]
+        config = stages.Configuration(str(first["rig"]), stages._num(first["curve_angle_deg"]),
+                                      stages._num(first["radius_mm"]))
+        signals = stages.run_signals(stages.config_rows(dataset, config),
+                                     input_col=str(sig.get("input", "input")),
+                                     output_col=str(sig.get("output", "output")))
+        metrics, _, _ = stages.evaluate_configuration(group, signals, heldout=[], cross=False)
+        frames.append(metrics)
+    return pd.concat(frames, ignore_index=True) if frames else stages.metrics_frame([])
+
+
+def main_cfg(cfg: Any) -> pd.DataFrame:
+    """What ``python -m pipelines.fit`` does with its composed config (also MLflow)."""
+    from pipelines import tracking
+
+    plain = to_container(cfg)
+    paths = Paths.from_config(plain["paths"])
+    dataset = read_processed(paths.processed)
+    fits = run(plain, dataset=dataset)
+    settings = tracking.settings_from_config(plain.get("tracking", {}), root=paths.root)
+    tracker = tracking.Tracker(settings)
+    if tracker.enabled:
+        with tracking.StageRun(tracker, "fit", sweep_dir=hydra_sweep_dir()) as stage_run:
+            assert stage_run.parent_id is not None
+            base = tracking.flatten({k: v for k, v in plain.items()
+                                     if k not in ("family", "family_overrides", "tracking")})
+            hydra_dir = hydra_output_dir()
+            tracking.log_model_runs(
+                tracker, stage_run.parent_id, fits=fits,
+                metrics=fit_metrics(fits, dataset, plain), base_params=base,
+                tags={"dataset_hash": dataset_hash(paths.processed)},
+                hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, stage="fit",
+            )
+    return fits
+
+
+@hydra.main(config_path="../conf", config_name="fit", version_base="1.3")
+def main(cfg: Any) -> None:
+    main_cfg(cfg)
+
+
+if __name__ == "__main__":
+    main()

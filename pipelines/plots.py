@@ -1,0 +1,179 @@
+"""The report's figures (matplotlib, Agg backend): one function per figure, file out.
+
+* :func:`configuration_figure` - measured vs model time series and input-output loops of
+  every family overlaid, one row per evaluation excitation (seed 001 Fig. 4.10-4.21);
+* :func:`elementary_figure` - the weighted elementary operators q_i gamma_i of Gamma
+  (seed 001 Fig. 4.12);
+* :func:`shape_heatmaps` - an error metric over curve angle x radius, one panel per family;
+* :func:`error_vs_shape_lines` - the same metric against curve angle, one line per radius.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import matplotlib  # noqa: E402
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from rig_io.atomic import atomic_path  # noqa: E402
+
+FAMILY_COLORS = {
+    "linear": "#7f7f7f", "gamma": "#1f77b4", "preisach": "#2ca02c", "bouc_wen": "#d62728",
+    "coleman_hodgdon": "#9467bd",
+}
+EXCITATION_ORDER = ("sine_decay", "triangle_decay", "trapezoid_decay")
+
+
+def _color(family: str, i: int) -> Any:
+    return FAMILY_COLORS.get(family, f"C{(i + 4) % 10}")
+
+
+def _save(fig: Any, path: Path, dpi: int) -> Path:
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)
+    return path
+
+
+def _thin(n: int, max_points: int) -> slice:
+    return slice(None, None, max(1, int(np.ceil(n / max_points))))
+
+
+def configuration_figure(preds: pd.DataFrame, path: Path, *, title: str,
+                         fit_excitation: str, dpi: int = 72, max_points: int = 3000) -> Path:
+    """Time series (left) and loops (right) of the measured output and every family."""
+    preds = preds[preds["fit_excitation"].astype(str) == fit_excitation]
+    kinds = sorted(preds["eval_excitation"].astype(str).unique(),
+                   key=lambda k: (k != fit_excitation, EXCITATION_ORDER.index(k)
+                                  if k in EXCITATION_ORDER else 99, k))
+    families = sorted(preds["family"].astype(str).unique())
+    fig, axes = plt.subplots(max(len(kinds), 1), 2, figsize=(11, 2.6 * max(len(kinds), 1)),
+                             squeeze=False, gridspec_kw={"width_ratios": [2.2, 1]})
+    for row, kind in enumerate(kinds):
+        sub = preds[preds["eval_excitation"].astype(str) == kind]
+        first_run = sorted(sub["run_id"].astype(str).unique())[0]
+        sub = sub[sub["run_id"].astype(str) == first_run]
+        ax_t, ax_l = axes[row]
+        base = sub[sub["family"].astype(str) == families[0]]
+        s = _thin(len(base), max_points)
+        t = base["t_s"].to_numpy()[s]
+        ax_t.plot(t, base["output"].to_numpy()[s], color="k", lw=1.4, label="measured")
+        ax_l.plot(base["input"].to_numpy()[s], base["output"].to_numpy()[s], color="k", lw=1.2)
+        for i, fam in enumerate(families):
+            f = sub[sub["family"].astype(str) == fam]
+            s2 = _thin(len(f), max_points)
+            ax_t.plot(f["t_s"].to_numpy()[s2], f["predicted"].to_numpy()[s2], lw=0.9,
+                      color=_color(fam, i), label=fam)
+            ax_l.plot(f["input"].to_numpy()[s2], f["predicted"].to_numpy()[s2], lw=0.8,
+                      color=_color(fam, i))
+        split = "identification" if kind == fit_excitation else "held-out"
+        ax_t.set_title(f"{kind} ({split})", fontsize=9, loc="left")
+        ax_t.set_ylabel("output [mm]")
+        ax_l.set_xlabel("input [mm]")
+        ax_l.set_ylabel("output [mm]")
+        ax_t.grid(alpha=0.3)
+        ax_l.grid(alpha=0.3)
+    axes[-1][0].set_xlabel("t [s]")
+    axes[0][0].legend(fontsize=7, ncol=min(len(families) + 1, 6), loc="upper right")
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return _save(fig, path, dpi)
+
+
+def elementary_figure(t: np.ndarray, u: np.ndarray, y: np.ndarray, operators: np.ndarray,
+                      weights: np.ndarray, thresholds: np.ndarray, path: Path, *,
+                      title: str, dpi: int = 72, max_points: int = 3000) -> Path:
+    """Weighted elementary operators q_i gamma_i (seed 001 Fig. 4.12) and their sum."""
+    s = _thin(t.size, max_points)
+    weighted = operators * weights[None, :]
+    fig, (ax_t, ax_l) = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios":
+                                                                           [2.2, 1]})
+    cmap = plt.get_cmap("viridis")
+    for i in range(weights.size):
+        c = cmap(i / max(weights.size - 1, 1))
+        label = f"q{i + 1}={weights[i]:+.3f}, p={thresholds[i]:g}"
+        ax_t.plot(t[s], weighted[s, i], lw=0.8, color=c, label=label)
+        ax_l.plot(u[s], weighted[s, i], lw=0.8, color=c)
+    ax_t.plot(t[s], weighted.sum(axis=1)[s], color="r", lw=1.2, label="sum (Gamma)")
+    ax_t.plot(t[s], y[s], color="k", lw=0.8, ls="--", label="measured")
+    ax_t.set_xlabel("t [s]")
+    ax_t.set_ylabel("q_i gamma_i [mm]")
+    ax_l.set_xlabel("input [mm]")
+    ax_t.legend(fontsize=6, ncol=2, loc="upper right")
+    for ax in (ax_t, ax_l):
+        ax.grid(alpha=0.3)
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return _save(fig, path, dpi)
+
+
+def shape_heatmaps(metrics: pd.DataFrame, path: Path, *, metric: str, split: str,
+                   title: str, dpi: int = 72) -> Path | None:
+    """``metric`` (mean over the excitations of ``split``) on the curve angle x radius grid."""
+    m = metrics[(metrics["split"] == split)].dropna(subset=["curve_angle_deg", "radius_mm"])
+    if m.empty:
+        return None
+    families = sorted(m["family"].astype(str).unique())
+    grid = m.groupby(["family", "curve_angle_deg", "radius_mm"], observed=True)[metric].mean()
+    angles = sorted(m["curve_angle_deg"].unique())
+    radii = sorted(m["radius_mm"].unique())
+    vmax = float(np.nanpercentile(grid.to_numpy(), 98)) if len(grid) else 1.0
+    vmin = float(np.nanmin(grid.to_numpy())) if len(grid) else 0.0
+    fig, axes = plt.subplots(1, len(families), figsize=(2.6 * len(families) + 1.2, 3.2),
+                             squeeze=False)
+    image = None
+    for ax, fam in zip(axes[0], families, strict=True):
+        z = np.full((len(radii), len(angles)), np.nan)
+        for (f, a, r), v in grid.items():
+            if f == fam:
+                z[radii.index(r), angles.index(a)] = v
+        image = ax.imshow(z, origin="lower", aspect="auto", cmap="magma_r", vmin=vmin,
+                          vmax=max(vmax, vmin + 1e-12))
+        ax.set_xticks(range(len(angles)), [f"{a:g}" for a in angles], fontsize=7)
+        ax.set_yticks(range(len(radii)), [f"{r:g}" for r in radii], fontsize=7)
+        ax.set_title(fam, fontsize=9)
+        ax.set_xlabel("curve angle [deg]", fontsize=8)
+        for i in range(len(radii)):
+            for j in range(len(angles)):
+                if np.isfinite(z[i, j]):
+                    ax.text(j, i, f"{z[i, j]:.2g}", ha="center", va="center", fontsize=6,
+                            color="w" if z[i, j] > (vmin + vmax) / 2 else "k")
+    axes[0][0].set_ylabel("radius [mm]", fontsize=8)
+    if image is not None:
+        fig.colorbar(image, ax=list(axes[0]), shrink=0.85, label=f"{split} {metric}")
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path, dpi)
+
+
+def error_vs_shape_lines(metrics: pd.DataFrame, path: Path, *, metric: str, split: str,
+                         title: str, dpi: int = 72) -> Path | None:
+    """``metric`` against curve angle, one line per radius, one panel per family."""
+    m = metrics[(metrics["split"] == split)].dropna(subset=["curve_angle_deg", "radius_mm"])
+    if m.empty:
+        return None
+    families = sorted(m["family"].astype(str).unique())
+    g = m.groupby(["family", "radius_mm", "curve_angle_deg"], observed=True)[metric].mean()
+    fig, axes = plt.subplots(1, len(families), figsize=(2.6 * len(families) + 0.5, 3.0),
+                             squeeze=False, sharey=True)
+    for ax, fam in zip(axes[0], families, strict=True):
+        sub = g.loc[fam]
+        for k, r in enumerate(sorted(sub.index.get_level_values(0).unique())):
+            line = sub.loc[r]
+            ax.plot(line.index, line.to_numpy(), marker="o", ms=3, lw=1, color=f"C{k}",
+                    label=f"r={r:g} mm")
+        ax.set_title(fam, fontsize=9)
+        ax.set_xlabel("curve angle [deg]", fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel(f"{split} {metric}", fontsize=8)
+    axes[0][0].legend(fontsize=6)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path, dpi)

@@ -1,0 +1,442 @@
+"""Stage ``report``: the seed 001 Table 4.1 equivalent, a leaderboard of families per
+configuration, plots, and a static report (``report.md`` + ``report.html``).
+
+    python -m pipelines.report
+
+Reads only the other stages' outputs: ``metrics.parquet``, the model files and the
+predictions files. Writes under ``${paths.reports}``: ``gamma_weights.parquet|csv``,
+``leaderboard.parquet|csv``, ``family_summary.csv``, ``plots/*.png``, ``report.md``,
+``report.html``. Nothing is redrawn when its inputs are unchanged (``report_key.json``).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import hydra
+import numpy as np
+import pandas as pd
+
+from pipelines import cache, stages
+from pipelines.common import (
+    Paths,
+    dataset_hash,
+    hydra_output_dir,
+    hydra_sweep_dir,
+    to_container,
+)
+from pipelines.fit import load_models
+from pipelines.stages import Configuration, PipelineError
+from rig_io.atomic import atomic_path, write_text_atomic
+
+log = logging.getLogger(__name__)
+KEY_FILE = "report_key.json"
+
+
+@dataclass
+class ReportResult:
+    """What the report stage produced (paths are absolute)."""
+
+    reports_dir: Path
+    files: list[Path] = field(default_factory=list)
+    #: configuration label -> figure files showing it (attached to that configuration's runs)
+    config_plots: dict[str, list[Path]] = field(default_factory=dict)
+    cached: bool = False
+    key: str = ""
+    seconds: float = 0.0
+
+
+# --------------------------------------------------------------------------------------
+# the document (Markdown and HTML from the same blocks)
+# --------------------------------------------------------------------------------------
+
+
+class Doc:
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.blocks: list[tuple[str, Any]] = []
+
+    def h(self, level: int, text: str) -> None:
+        self.blocks.append(("h", (level, text)))
+
+    def p(self, text: str) -> None:
+        self.blocks.append(("p", text))
+
+    def table(self, frame: pd.DataFrame, *, floatfmt: str = ".3g") -> None:
+        self.blocks.append(("table", (frame, floatfmt)))
+
+    def img(self, path: Path, caption: str) -> None:
+        self.blocks.append(("img", (path.relative_to(self.root).as_posix(), caption)))
+
+    def links(self, items: Sequence[tuple[str, Path]]) -> None:
+        self.blocks.append(("links", [(t, p.relative_to(self.root).as_posix())
+                                      for t, p in items]))
+
+    @staticmethod
+    def _cell(v: Any, floatfmt: str) -> str:
+        if isinstance(v, (float, np.floating)):
+            return "" if v != v else format(float(v), floatfmt)
+        if isinstance(v, list):
+            return ", ".join(format(x, "g") if isinstance(x, float) else str(x) for x in v)
+        return "" if v is None or v is pd.NA else str(v)
+
+    def markdown(self) -> str:
+        out: list[str] = []
+        for kind, data in self.blocks:
+            if kind == "h":
+                out.append(f"{'#' * data[0]} {data[1]}\n")
+            elif kind == "p":
+                out.append(f"{data}\n")
+            elif kind == "table":
+                frame, fmt = data
+                cols = [str(c) for c in frame.columns]
+                out.append("| " + " | ".join(cols) + " |")
+                out.append("|" + "|".join("---" for _ in cols) + "|")
+                for row in frame.itertuples(index=False):
+                    out.append("| " + " | ".join(self._cell(v, fmt) for v in row) + " |")
+                out.append("")
+            elif kind == "img":
+                out.append(f"![{data[1]}]({data[0]})\n\n*{data[1]}*\n")
+            elif kind == "links":
+                out.append("\n".join(f"- [{t}]({p})" for t, p in data) + "\n")
+        return "\n".join(out)
+
+    def html(self, title: str) -> str:
+        body: list[str] = []
+        esc = html.escape
+        for kind, data in self.blocks:
+            if kind == "h":
+                body.append(f"<h{data[0]}>{esc(data[1])}</h{data[0]}>")
+            elif kind == "p":
+                body.append(f"<p>{esc(data)}</p>")
+            elif kind == "table":
+                frame, fmt = data
+                head = "".join(f"<th>{esc(str(c))}</th>" for c in frame.columns)
+                rows = "".join(
+                    "<tr>" + "".join(f"<td>{esc(self._cell(v, fmt))}</td>" for v in row)
+                    + "</tr>" for row in frame.itertuples(index=False))
+                body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody>"
+                            "</table>")
+            elif kind == "img":
+                body.append(f'<figure><img src="{esc(data[0])}" alt="{esc(data[1])}">'
+                            f"<figcaption>{esc(data[1])}</figcaption></figure>")
+            elif kind == "links":
+                items = "".join(f'<li><a href="{esc(p)}">{esc(t)}</a></li>' for t, p in data)
+                body.append(f"<ul>{items}</ul>")
+        style = ("body{font-family:sans-serif;max-width:1200px;margin:auto;padding:1em}"
+                 "table{border-collapse:collapse;font-size:12px;margin:0.5em 0}"
+                 "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
+                 "img{max-width:100%}figcaption{font-size:12px;color:#555}")
+        return (f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}"
+                f"</title><style>{style}</style></head><body>{''.join(body)}</body></html>\n")
+
+
+# --------------------------------------------------------------------------------------
+# the stage
+# --------------------------------------------------------------------------------------
+
+
+def _config_of(row: Mapping[str, Any]) -> Configuration:
+    return Configuration(str(row["rig"]), stages._num(row["curve_angle_deg"]),
+                         stages._num(row["radius_mm"]))
+
+
+def pick_exemplary(configs: Sequence[Configuration], wanted: Mapping[str, Any]) -> Configuration:
+    """The configured exemplary shape, else the largest angle with the smallest radius."""
+    for c in configs:
+        if (c.rig == wanted.get("rig") and stages._matches(c.curve_angle_deg,
+                                                           [wanted.get("curve_angle_deg")])
+                and stages._matches(c.radius_mm, [wanted.get("radius_mm")])):
+            return c
+    return sorted(configs, key=lambda c: (-(c.curve_angle_deg or 0), c.radius_mm or 0))[0]
+
+
+def _write_table(frame: pd.DataFrame, base: Path, *, csv: bool = True) -> list[Path]:
+    out = []
+    with atomic_path(base.with_suffix(".parquet")) as tmp:
+        frame.to_parquet(tmp, index=False)
+    out.append(base.with_suffix(".parquet"))
+    if csv:
+        flat = frame.copy()
+        for col in flat.columns:
+            if flat[col].map(lambda v: isinstance(v, list)).any():
+                flat[col] = flat[col].map(json.dumps)
+        with atomic_path(base.with_suffix(".csv")) as tmp:
+            flat.to_csv(tmp, index=False)
+        out.append(base.with_suffix(".csv"))
+    return out
+
+
+def _plot_configuration(pred_path: Path, out: Path, title: str, fit_excitation: str,
+                        dpi: int, max_points: int) -> Path | None:
+    from pipelines import plots
+
+    if not pred_path.exists():
+        return None
+    preds = pd.read_parquet(pred_path)
+    if preds.empty:
+        return None
+    return plots.configuration_figure(preds, out, title=title, fit_excitation=fit_excitation,
+                                      dpi=dpi, max_points=max_points)
+
+
+def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
+        fits: pd.DataFrame | None = None) -> ReportResult:
+    """Hydra-free core: config in, :class:`ReportResult` out; writes under reports/."""
+    from pipelines import plots
+    from pipelines.validate import prediction_path, read_prediction_meta
+
+    start = time.perf_counter()
+    paths = Paths.from_config(cfg["paths"])
+    reports = paths.reports
+    if metrics is None:
+        if not paths.metrics_parquet.exists():
+            raise PipelineError(f"{paths.metrics_parquet} does not exist; run `make validate`")
+        metrics = pd.read_parquet(paths.metrics_parquet)
+    if metrics.empty:
+        raise PipelineError("the metrics table is empty: nothing to report")
+    fit_exc = str(cfg.get("fit_excitation", "sine_decay"))
+    metric = str(cfg.get("metric", "rmse"))
+    plot_cfg = dict(cfg.get("plots") or {})
+    dpi, max_points = int(plot_cfg.get("dpi", 72)), int(plot_cfg.get("max_points", 3000))
+    configs = sorted({_config_of(r) for r in metrics.to_dict("records")},
+                     key=lambda c: (c.rig, c.curve_angle_deg or -1, c.radius_mm or -1))
+    if fits is None:
+        fits = load_models(paths.models)
+    labels = {c.label for c in configs}
+    fits = fits[fits.apply(lambda r: _config_of(r).label in labels, axis=1)
+                if not fits.empty else []]
+    fits = fits[fits["fit_excitation"] == fit_exc].reset_index(drop=True)
+    pred_keys = {c.label: (read_prediction_meta(prediction_path(paths.predictions, c)) or {})
+                 .get("key") for c in configs}
+    settings = {k: v for k, v in cfg.items() if k not in ("paths", "tracking", "n_jobs",
+                                                          "cache")}
+    key = cache.combine({
+        "stage": "report", "metrics": cache.hash_frame(metrics),
+        "models": sorted(fits["key"].astype(str)), "predictions": pred_keys,
+        "settings": settings,
+        "code": cache.hash_files([Path(__file__), Path(plots.__file__)]),
+    })
+    key_file = reports / KEY_FILE
+    if cfg.get("cache", True) and key_file.exists() and (reports / "report.md").exists():
+        try:
+            record = json.loads(key_file.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError):
+            record = {}
+        if record.get("key") == key and all(Path(f).exists() for f in record.get("files", [])):
+            log.info("report: up to date (%s)", key)
+            return ReportResult(reports, [Path(f) for f in record["files"]],
+                                {k: [Path(p) for p in v]
+                                 for k, v in record.get("config_plots", {}).items()},
+                                cached=True, key=key, seconds=time.perf_counter() - start)
+
+    files: list[Path] = []
+    plots_dir = reports / "plots"
+    # -- tables ------------------------------------------------------------------------
+    gamma = stages.gamma_weights_table(fits, metrics)
+    files += _write_table(gamma, reports / "gamma_weights")
+    board = stages.leaderboard(metrics[metrics["fit_excitation"] == fit_exc], metric=metric)
+    files += _write_table(board, reports / "leaderboard")
+    summary = stages.family_summary(board, metric=metric) if not board.empty else board
+    with atomic_path(reports / "family_summary.csv") as tmp:
+        summary.to_csv(tmp, index=False)
+    files.append(reports / "family_summary.csv")
+
+    # -- figures -----------------------------------------------------------------------
+    config_plots: dict[str, list[Path]] = {}
+    jobs = []
+    if plot_cfg.get("per_configuration", True):
+        for c in configs:
+            out = plots_dir / f"config_{c.label}.png"
+            title = (f"{c.rig}  phi={c.curve_angle_deg:g} deg  r={c.radius_mm:g} mm"
+                     if c.curve_angle_deg is not None and c.radius_mm is not None else c.label)
+            jobs.append((c.label, prediction_path(paths.predictions, c), out, title))
+    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg.get("n_jobs", 1))
+    if n_jobs > 1 and len(jobs) > 1:
+        from joblib import Parallel, delayed
+
+        made = Parallel(n_jobs=n_jobs)(delayed(_plot_configuration)(
+            p, o, t, fit_exc, dpi, max_points) for _, p, o, t in jobs)
+    else:
+        made = [_plot_configuration(p, o, t, fit_exc, dpi, max_points) for _, p, o, t in jobs]
+    for (label, *_), path in zip(jobs, made, strict=True):
+        if path is not None:
+            config_plots.setdefault(label, []).append(path)
+            files.append(path)
+
+    exemplary = pick_exemplary(configs, cfg.get("exemplary") or {})
+    elementary = _elementary_plot(fits, exemplary, paths, fit_exc, plots_dir, dpi, max_points)
+    if elementary is not None:
+        files.append(elementary)
+        config_plots.setdefault(exemplary.label, []).append(elementary)
+    shape_figs = []
+    for split, m in (("heldout", metric), ("fit", "sse")):
+        sub = metrics[metrics["fit_excitation"] == fit_exc]
+        fig = plots.shape_heatmaps(sub, plots_dir / f"heatmap_{split}_{m}.png", metric=m,
+                                   split=split, title=f"{split} {m} vs curve angle and radius",
+                                   dpi=dpi)
+        if fig is not None:
+            shape_figs.append((f"{split} {m} over curve angle x radius", fig))
+    line = plots.error_vs_shape_lines(metrics[metrics["fit_excitation"] == fit_exc],
+                                      plots_dir / f"lines_heldout_{metric}.png", metric=metric,
+                                      split="heldout", title=f"held-out {metric} vs curve angle",
+                                      dpi=dpi)
+    if line is not None:
+        shape_figs.append((f"held-out {metric} vs curve angle, one line per radius", line))
+    files += [p for _, p in shape_figs]
+
+    # -- the document --------------------------------------------------------------------
+    doc = _document(reports, metrics=metrics, fits=fits, gamma=gamma, board=board,
+                    summary=summary, metric=metric, fit_exc=fit_exc, exemplary=exemplary,
+                    config_plots=config_plots, shape_figs=shape_figs, elementary=elementary,
+                    paths=paths)
+    formats = list(cfg.get("formats", ["md", "html"]))
+    if "md" in formats:
+        files.append(write_text_atomic(reports / "report.md", doc.markdown()))
+    if "html" in formats:
+        files.append(write_text_atomic(reports / "report.html",
+                                       doc.html("TSM hysteresis pipeline report")))
+    write_text_atomic(key_file, json.dumps({
+        "key": key, "files": [str(f) for f in files],
+        "config_plots": {k: [str(p) for p in v] for k, v in config_plots.items()},
+    }, indent=1))
+    seconds = time.perf_counter() - start
+    log.info("report: %d files in %.1f s -> %s", len(files), seconds, reports / "report.md")
+    return ReportResult(reports, files, config_plots, cached=False, key=key, seconds=seconds)
+
+
+def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fit_exc: str,
+                     plots_dir: Path, dpi: int, max_points: int) -> Path | None:
+    """Seed 001 Fig. 4.12 for the exemplary configuration's Gamma model."""
+    from pipelines import plots
+    from pipelines.validate import prediction_path
+
+    rows = fits[(fits["family"] == "gamma") & fits["model_json"].notna()
+                & (fits.apply(lambda r: _config_of(r).label == config.label, axis=1))]
+    pred_path = prediction_path(paths.predictions, config)
+    if rows.empty or not pred_path.exists():
+        return None
+    model = stages.load_model(str(rows.iloc[0]["model_json"]))
+    preds = pd.read_parquet(pred_path)
+    sub = preds[(preds["family"].astype(str) == "gamma")
+                & (preds["eval_excitation"].astype(str) == fit_exc)
+                & (preds["fit_excitation"].astype(str) == fit_exc)]
+    if sub.empty:
+        return None
+    sub = sub[sub["run_id"] == sub["run_id"].iloc[0]]
+    u = sub["input"].to_numpy(dtype=np.float64)
+    q = np.asarray(getattr(model, "weights_", []), dtype=np.float64).ravel()
+    p = np.asarray(getattr(model, "thresholds_", []), dtype=np.float64).ravel()
+    if q.size == 0 or q.size != p.size:
+        return None
+    design = getattr(model, "design_matrix", None)
+    ops = np.asarray(design(u)) if callable(design) else stages.play_operator_outputs(u, p)
+    return plots.elementary_figure(
+        sub["t_s"].to_numpy(), u, sub["output"].to_numpy(), ops[:, :q.size], q, p,
+        plots_dir / f"elementary_{config.label}.png",
+        title=f"Weighted elementary operators q_i gamma_i of Gamma, {config.label} "
+              f"({fit_exc}; seed 001 Fig. 4.12)", dpi=dpi, max_points=max_points)
+
+
+def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: pd.DataFrame,
+              board: pd.DataFrame, summary: pd.DataFrame, metric: str, fit_exc: str,
+              exemplary: Configuration, config_plots: Mapping[str, list[Path]],
+              shape_figs: Sequence[tuple[str, Path]], elementary: Path | None,
+              paths: Paths) -> Doc:
+    doc = Doc(root)
+    n_cfg = metrics.groupby(["rig", "curve_angle_deg", "radius_mm"], dropna=False).ngroups
+    doc.h(1, "TSM hysteresis pipeline report")
+    doc.p(f"{metrics['family'].nunique()} families x {n_cfg} configurations; identification "
+          f"excitation `{fit_exc}`; {len(metrics)} metric rows "
+          f"(`metrics.parquet`, `metrics.csv`). Dataset hash `{dataset_hash(paths.processed)}`."
+          f" Ranking metric: mean held-out {metric}.")
+    doc.h(2, "Families over all configurations")
+    doc.table(summary)
+    doc.h(2, f"Leaderboard per configuration (held-out {metric}, winner in the last column)")
+    if not board.empty:
+        wide = board.pivot_table(index=["rig", "curve_angle_deg", "radius_mm"],
+                                 columns="family", values=f"heldout_{metric}",
+                                 dropna=False, observed=True)
+        winners = (board[board["rank"] == 1].groupby(["rig", "curve_angle_deg", "radius_mm"],
+                                                     dropna=False)["family"]
+                   .agg(lambda s: "/".join(sorted(s))))
+        wide["best"] = winners
+        doc.table(wide.reset_index())
+    doc.h(2, "Table 4.1 equivalent: Gamma weights Q and SSE per configuration")
+    doc.p("Weights identified under sum(Q) = 1 (seed 001 eq. 4.10 as its text means it); SSE "
+          "on the identification record at the rig's sample rate (`gamma_weights.parquet`).")
+    if not gamma.empty:
+        doc.table(gamma.drop(columns=["thresholds", "fit_excitation"]))
+    doc.h(2, "Error against curve angle and radius")
+    for caption, fig in shape_figs:
+        doc.img(fig, caption)
+    doc.h(2, f"Exemplary configuration {exemplary.label}")
+    for fig in config_plots.get(exemplary.label, []):
+        if fig != elementary:
+            doc.img(fig, f"Measured vs model, time series and loops ({exemplary.label})")
+    if elementary is not None:
+        doc.img(elementary, "Weighted elementary operators of Gamma (seed 001 Fig. 4.12)")
+    doc.h(2, "Every configuration")
+    doc.links([(label, figs[0]) for label, figs in sorted(config_plots.items()) if figs])
+    failed = fits[fits["error"].notna()] if "error" in fits else fits.iloc[0:0]
+    errors_file = paths.reports / "validate_errors.json"
+    val_errors = json.loads(errors_file.read_text()) if errors_file.exists() else []
+    if len(failed) or val_errors:
+        doc.h(2, "Failures")
+        if len(failed):
+            doc.table(failed[["family", "rig", "curve_angle_deg", "radius_mm", "error"]])
+        for e in val_errors:
+            doc.p(f"validate: {e}")
+    return doc
+
+
+def main_cfg(cfg: Any) -> ReportResult:
+    """What ``python -m pipelines.report`` does with its composed config (also MLflow)."""
+    from pipelines import tracking
+
+    plain = to_container(cfg)
+    paths = Paths.from_config(plain["paths"])
+    result = run(plain)
+    tracker = tracking.Tracker(tracking.settings_from_config(plain.get("tracking", {}),
+                                                             root=paths.root))
+    if tracker.enabled:
+        with tracking.StageRun(tracker, "report", sweep_dir=hydra_sweep_dir()) as stage_run:
+            assert stage_run.parent_id is not None
+            log_report(tracker, stage_run.parent_id, result)
+            hydra_dir = hydra_output_dir()
+            if hydra_dir is not None:
+                tracker.log_artifact(stage_run.parent_id, hydra_dir / ".hydra", ".hydra")
+    return result
+
+
+def log_report(tracker: Any, run_id: str, result: ReportResult) -> None:
+    """Report files and tables onto a run (the pipeline's parent run or a report run)."""
+    reports = result.reports_dir
+    for name in ("gamma_weights", "leaderboard"):
+        path = reports / f"{name}.parquet"
+        if path.exists():
+            tracker.log_table(run_id, pd.read_parquet(path).assign(
+                **({"thresholds": lambda d: d["thresholds"].map(
+                    lambda v: json.dumps(list(v)))} if name == "gamma_weights" else {})),
+                f"tables/{name}.json")
+    for f in result.files:
+        if f.suffix in (".md", ".html", ".csv"):
+            tracker.log_artifact(run_id, f, "report")
+        elif f.suffix == ".png":
+            tracker.log_artifact(run_id, f, "report/plots")
+
+
+@hydra.main(config_path="../conf", config_name="report", version_base="1.3")
+def main(cfg: Any) -> None:
+    main_cfg(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,226 @@
+"""``make pipeline``: generate -> ingest -> fit -> validate -> report, then MLflow.
+
+    python -m pipelines.run_all
+    python -m pipelines.run_all +experiment=quick
+    python -m pipelines.run_all paths.root=/tmp/cold-run          # everything in another folder
+
+``generate`` and ``ingest`` run as their own Hydra entry points (a subprocess each, in
+``paths.root``); ``fit``, ``validate`` and ``report`` are called in this process through their
+Hydra-free ``run`` functions, each with its own composed stage config (``conf/fit.yaml`` ...)
+plus the shared values of ``conf/pipeline.yaml``. Every stage skips what its content hashes
+say is unchanged. MLflow: one parent run per invocation and a child run per (family,
+configuration); when nothing changed at all, the parent run only points at the run that
+already holds the identical results (``same_as`` tag) instead of logging 120 copies.
+Per-stage wall times go to ``${paths.reports}/pipeline_timing.json`` and the parent run.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import hydra
+import pandas as pd
+
+from pipelines import cache
+from pipelines.common import (
+    CONF_DIR,
+    REPO_ROOT,
+    Paths,
+    dataset_hash,
+    hydra_output_dir,
+    read_processed,
+    to_container,
+)
+from pipelines.stages import PipelineError
+from rig_io.atomic import write_text_atomic
+
+log = logging.getLogger(__name__)
+EXTERNAL_STAGES = ("generate", "ingest")
+OWN_STAGES = ("fit", "validate", "report")
+
+
+@dataclass
+class PipelineResult:
+    timings: dict[str, float] = field(default_factory=dict)
+    fits: pd.DataFrame | None = None
+    metrics: pd.DataFrame | None = None
+    report: Any = None
+    parent_run_id: str | None = None
+    up_to_date: bool = False
+
+
+def compose_stage(name: str, overrides: Sequence[str] = ()) -> dict[str, Any]:
+    """A stage's own config (``conf/<name>.yaml``) composed with overrides, as a plain dict."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    if GlobalHydra.instance().is_initialized():
+        cfg = compose(config_name=name, overrides=list(overrides))
+    else:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            cfg = compose(config_name=name, overrides=list(overrides))
+    return to_container(cfg)
+
+
+def stage_config(name: str, pipeline: Mapping[str, Any]) -> dict[str, Any]:
+    """``conf/<name>.yaml`` + ``overrides.<name>`` + the pipeline's shared values."""
+    cfg = compose_stage(name, list((pipeline.get("overrides") or {}).get(name) or []))
+    cfg["paths"] = dict(pipeline["paths"])
+    cfg["tracking"] = dict(pipeline.get("tracking") or {})
+    shared = ("config", "fit_excitations", "signals", "n_jobs", "cache")
+    if name in ("fit", "validate"):
+        for key in shared:
+            if key in pipeline:
+                cfg[key] = pipeline[key]
+    if name == "validate":
+        for key in ("heldout", "cross"):
+            if key in pipeline:
+                cfg[key] = pipeline[key]
+    if name == "report":
+        cfg["fit_excitation"] = list(pipeline.get("fit_excitations") or ["sine_decay"])[0]
+        for key in ("n_jobs", "cache"):
+            if key in pipeline:
+                cfg[key] = pipeline[key]
+    cfg["progress"] = bool(pipeline.get("progress", True))
+    return cfg
+
+
+def run_external(stage: str, overrides: Sequence[str], *, root: Path) -> None:
+    """Run ``python -m pipelines.<stage>`` in ``root`` (relative data paths land there)."""
+    cmd = [sys.executable, "-m", f"pipelines.{stage}", *overrides,
+           f"hydra.run.dir={root / 'outputs' / 'run_all' / stage}"]
+    env = {**os.environ, "HYDRA_FULL_ERROR": "1",
+           "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO_ROOT),
+                                                       os.environ.get("PYTHONPATH")]))}
+    log.info("run_all: %s", " ".join(cmd))
+    proc = subprocess.run(cmd, cwd=root, env=env, check=False)
+    if proc.returncode != 0:
+        raise PipelineError(f"stage {stage!r} failed with exit code {proc.returncode} "
+                            f"(command: {' '.join(cmd)})")
+
+
+def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
+    """Hydra-free core of ``make pipeline`` (cfg = composed ``conf/pipeline.yaml``)."""
+    from pipelines import fit, report, tracking, validate
+
+    paths = Paths.from_config(cfg["paths"])
+    paths.root.mkdir(parents=True, exist_ok=True)
+    result = PipelineResult()
+    wanted = list(cfg.get("stages") or [*EXTERNAL_STAGES, *OWN_STAGES])
+    unknown = [s for s in wanted if s not in (*EXTERNAL_STAGES, *OWN_STAGES)]
+    if unknown:
+        raise PipelineError(f"unknown stage(s) {unknown}; known: "
+                            f"{[*EXTERNAL_STAGES, *OWN_STAGES]}")
+    tracker = tracking.Tracker(tracking.settings_from_config(cfg.get("tracking") or {},
+                                                             root=paths.root))
+    total = time.perf_counter()
+    if tracker.enabled:
+        # Before any parallel worker exists: schema creation must happen exactly once.
+        t0 = time.perf_counter()
+        tracker.init_store()
+        result.timings["tracking_init"] = time.perf_counter() - t0
+
+    overrides = cfg.get("overrides") or {}
+    for stage in EXTERNAL_STAGES:
+        if stage in wanted:
+            t0 = time.perf_counter()
+            run_external(stage, list(overrides.get(stage) or []), root=paths.root)
+            result.timings[stage] = time.perf_counter() - t0
+
+    dataset = None
+    if any(s in wanted for s in ("fit", "validate")):
+        t0 = time.perf_counter()
+        dataset = read_processed(paths.processed)
+        result.timings["read_dataset"] = time.perf_counter() - t0
+    if "fit" in wanted:
+        t0 = time.perf_counter()
+        result.fits = fit.run(stage_config("fit", cfg), dataset=dataset)
+        result.timings["fit"] = time.perf_counter() - t0
+    if "validate" in wanted:
+        t0 = time.perf_counter()
+        result.metrics, _ = validate.run(stage_config("validate", cfg), dataset=dataset)
+        result.timings["validate"] = time.perf_counter() - t0
+    if "report" in wanted:
+        t0 = time.perf_counter()
+        result.report = report.run(stage_config("report", cfg), metrics=result.metrics)
+        result.timings["report"] = time.perf_counter() - t0
+
+    if tracker.enabled:
+        t0 = time.perf_counter()
+        result.parent_run_id, result.up_to_date = _track(tracker, cfg, paths, result)
+        result.timings["tracking"] = time.perf_counter() - t0
+    result.timings["total"] = time.perf_counter() - total
+    write_text_atomic(paths.reports / "pipeline_timing.json",
+                      json.dumps({k: round(v, 3) for k, v in result.timings.items()}, indent=1))
+    if tracker.enabled and result.parent_run_id:
+        tracker.log(result.parent_run_id, metrics={
+            f"stage_seconds.{k}": v for k, v in result.timings.items()})
+        tracker.end_run(result.parent_run_id)
+    log.info("pipeline: %s", ", ".join(f"{k} {v:.1f} s" for k, v in result.timings.items()))
+    return result
+
+
+def _track(tracker: Any, cfg: Mapping[str, Any], paths: Paths,
+           result: PipelineResult) -> tuple[str, bool]:
+    """Parent run + one child per fitted model; or, when nothing changed, a pointer run."""
+    from pipelines import report as report_mod
+    from pipelines import tracking
+
+    fits, metrics = result.fits, result.metrics
+    data_hash = dataset_hash(paths.processed)
+    key = cache.combine({
+        "stage": "pipeline", "dataset": data_hash,
+        "models": sorted(fits["key"].astype(str)) if fits is not None else [],
+        "metrics": cache.hash_frame(metrics) if metrics is not None else "",
+        "report": result.report.key if result.report is not None else "",
+        "tracking": tracking.git_commit(),
+    })
+    tags = {"dataset_hash": data_hash, "pipeline_key": key}
+    params = tracking.flatten({k: v for k, v in cfg.items() if k != "tracking"})
+    previous = tracker.find_runs(
+        f"tags.pipeline_key = '{key}' and tags.complete = 'true'")
+    parent = tracker.start_run("pipeline", tags={"stage": "pipeline", "kind": "parent",
+                                                 **tags})
+    tracker.log(parent, params=params)
+    if metrics is not None:
+        tracker.log_table(parent, metrics, "tables/metrics.json")
+        tracker.log_artifact(parent, paths.metrics_csv, "tables")
+    hydra_dir = hydra_output_dir()
+    if hydra_dir is not None:
+        tracker.log_artifact(parent, hydra_dir / ".hydra", ".hydra")
+    if previous:
+        tracker.log(parent, tags={"up_to_date": "true", "same_as": previous[0].info.run_id})
+        return parent, True
+    if result.report is not None:
+        report_mod.log_report(tracker, parent, result.report)
+    if fits is not None:
+        fit_cfg = stage_config("fit", cfg)
+        base = tracking.flatten({k: v for k, v in fit_cfg.items()
+                                 if k not in ("family", "family_overrides", "tracking",
+                                              "families")})
+        tracking.log_model_runs(
+            tracker, parent, fits=fits, metrics=metrics, base_params=base, tags=tags,
+            hydra_dir=hydra_dir / ".hydra" if hydra_dir else None,
+            plots=result.report.config_plots if result.report is not None else None,
+            stage="pipeline", progress=bool(cfg.get("progress", True)),
+        )
+    tracker.log(parent, tags={"complete": "true"})
+    return parent, False
+
+
+@hydra.main(config_path="../conf", config_name="pipeline", version_base="1.3")
+def main(cfg: Any) -> None:
+    run_pipeline(to_container(cfg))
+
+
+if __name__ == "__main__":
+    main()

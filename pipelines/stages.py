@@ -1,0 +1,538 @@
+"""The fit -> validate -> report logic as pure functions: DataFrames in, DataFrames out.
+
+No files, no Hydra, no MLflow here (the entry points ``pipelines/fit.py`` etc. do the I/O).
+The processed dataset is the ingest contract: one row per sample with at least ``run_id``,
+``rig``, ``curve_angle_deg``, ``radius_mm``, ``excitation``, ``t_s`` and the signal columns.
+
+A *configuration* is one sheath shape on one rig: ``(rig, curve_angle_deg, radius_mm)``.
+Every family is identified on the configuration's identification run(s) and evaluated on
+the runs of the same configuration; the metrics table has one row per
+(family, configuration, fit excitation, evaluation excitation).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import warnings
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from hysteresis.base import HysteresisModel
+from hysteresis.metrics import METRIC_NAMES, error_statistics
+from pipelines import cache
+
+#: The columns of ``data/reports/metrics.parquet``, in order (issue 4).
+METRICS_COLUMNS: tuple[str, ...] = (
+    "family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation", "eval_excitation",
+    "split", *METRIC_NAMES,
+)
+CONFIG_COLUMNS = ("rig", "curve_angle_deg", "radius_mm")
+#: Columns of the fit results table (one row per family x configuration x fit excitation).
+FIT_COLUMNS: tuple[str, ...] = (
+    "family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation", "fit_run_ids",
+    "n_samples", "key", "model_json", "params_json", "fit_seconds", "error", "cached",
+)
+#: Columns of the predictions table (long format, one row per sample and model).
+PREDICTION_COLUMNS: tuple[str, ...] = (
+    "family", "fit_excitation", "eval_excitation", "run_id", "t_s", "input", "output",
+    "predicted",
+)
+REQUIRED_DATASET_COLUMNS = ("run_id", "rig", "curve_angle_deg", "radius_mm", "excitation", "t_s")
+
+
+class PipelineError(Exception):
+    """Bad input to a pipeline stage (missing column, unknown excitation, no data ...)."""
+
+
+# --------------------------------------------------------------------------------------
+# configurations and runs
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, order=True)
+class Configuration:
+    """One sheath shape on one rig. Angles/radii are ``None`` where the rig does not know."""
+
+    rig: str
+    curve_angle_deg: float | None
+    radius_mm: float | None
+
+    @property
+    def label(self) -> str:
+        """File- and MLflow-safe name, e.g. ``tsm-bench_phi090_r030``."""
+        return f"{self.rig}_phi{_fmt(self.curve_angle_deg)}_r{_fmt(self.radius_mm)}"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"rig": self.rig, "curve_angle_deg": self.curve_angle_deg,
+                "radius_mm": self.radius_mm}
+
+
+def _fmt(value: float | None) -> str:
+    if value is None:
+        return "NA"
+    return f"{value:03.0f}" if float(value).is_integer() else f"{value:g}".replace(".", "p")
+
+
+def _num(value: Any) -> float | None:
+    if value is None or (isinstance(value, float) and math.isnan(value)) or value is pd.NA:
+        return None
+    return float(value)
+
+
+def check_dataset(dataset: pd.DataFrame, *, signals: Sequence[str]) -> None:
+    """Raise :class:`PipelineError` naming every required column the dataset lacks."""
+    missing = [c for c in (*REQUIRED_DATASET_COLUMNS, *signals) if c not in dataset.columns]
+    if missing:
+        raise PipelineError(
+            f"processed dataset lacks column(s) {missing}; it has {list(dataset.columns)}"
+        )
+    if dataset.empty:
+        raise PipelineError("processed dataset is empty")
+
+
+def _as_values(selector: Any) -> list[Any] | None:
+    """``None`` (= all), a scalar or a list -> list of wanted values."""
+    if selector is None:
+        return None
+    if isinstance(selector, str) or not isinstance(selector, Iterable):
+        return [selector]
+    values = list(selector)
+    return values or None
+
+
+def configurations(
+    dataset: pd.DataFrame,
+    *,
+    rig: Any = None,
+    curve_angle_deg: Any = None,
+    radius_mm: Any = None,
+) -> list[Configuration]:
+    """The configurations present in ``dataset``, filtered by the given values (None = all)."""
+    check_dataset(dataset, signals=())
+    keys = dataset[list(CONFIG_COLUMNS)].drop_duplicates()
+    found = sorted(
+        {
+            Configuration(str(r.rig), _num(r.curve_angle_deg), _num(r.radius_mm))
+            for r in keys.itertuples(index=False)
+        },
+        key=lambda c: (c.rig, c.curve_angle_deg or -1.0, c.radius_mm or -1.0),
+    )
+    wanted_rig = _as_values(rig)
+    wanted_phi = _as_values(curve_angle_deg)
+    wanted_r = _as_values(radius_mm)
+    out = [
+        c for c in found
+        if (wanted_rig is None or c.rig in {str(v) for v in wanted_rig})
+        and (wanted_phi is None or _matches(c.curve_angle_deg, wanted_phi))
+        and (wanted_r is None or _matches(c.radius_mm, wanted_r))
+    ]
+    if not out:
+        raise PipelineError(
+            f"no configuration matches rig={rig!r} curve_angle_deg={curve_angle_deg!r} "
+            f"radius_mm={radius_mm!r}; the dataset has {[c.label for c in found]}"
+        )
+    return out
+
+
+def _matches(value: float | None, wanted: list[Any]) -> bool:
+    if value is None:
+        return any(w is None for w in wanted)
+    return any(w is not None and abs(float(w) - value) < 1e-9 for w in wanted)
+
+
+def config_rows(dataset: pd.DataFrame, config: Configuration) -> pd.DataFrame:
+    """The samples of one configuration (all its runs)."""
+    mask = dataset["rig"].astype(str) == config.rig
+    for col in ("curve_angle_deg", "radius_mm"):
+        value = getattr(config, col)
+        column = pd.to_numeric(dataset[col], errors="coerce")
+        mask &= column.isna() if value is None else (column - value).abs() < 1e-9
+    return dataset.loc[mask]
+
+
+@dataclass(frozen=True)
+class RunSignal:
+    """The input/output of one run, time-ordered, with a hash of exactly these values."""
+
+    run_id: str
+    excitation: str
+    t_s: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    data_hash: str
+
+
+def run_signals(
+    rows: pd.DataFrame, *, input_col: str = "input", output_col: str = "output"
+) -> dict[str, list[RunSignal]]:
+    """Runs of one configuration grouped by excitation kind (runs sorted by ``run_id``).
+
+    Samples where the input or the output is missing are dropped (a bending-joint run whose
+    output comes from a camera has gaps); a run left with fewer than 2 samples is skipped.
+    """
+    out: dict[str, list[RunSignal]] = {}
+    for run_id, run in rows.groupby("run_id", sort=True, observed=True):
+        run = run.sort_values("t_s", kind="stable")
+        t = run["t_s"].to_numpy(dtype=np.float64)
+        u = pd.to_numeric(run[input_col], errors="coerce").to_numpy(dtype=np.float64)
+        y = pd.to_numeric(run[output_col], errors="coerce").to_numpy(dtype=np.float64)
+        ok = np.isfinite(u) & np.isfinite(y) & np.isfinite(t)
+        if ok.sum() < 2:
+            warnings.warn(f"run {run_id!r}: fewer than 2 finite samples, skipped", stacklevel=2)
+            continue
+        t, u, y = t[ok], u[ok], y[ok]
+        kind = str(run["excitation"].iloc[0])
+        out.setdefault(kind, []).append(
+            RunSignal(str(run_id), kind, t, u, y, cache.hash_arrays(t, u, y))
+        )
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# fit
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FamilySpec:
+    """A model family as Hydra configures it: its name and its config (``_target_`` + params)."""
+
+    name: str
+    config: Mapping[str, Any]
+    #: Builds an unfitted model from ``config`` (Hydra's ``instantiate`` in the entry points).
+    build: Callable[[Mapping[str, Any]], HysteresisModel] = field(compare=False)
+    #: Hash of the code that implements the family, so that a code change refits it.
+    code_hash: str = ""
+
+
+@dataclass(frozen=True)
+class FitTask:
+    family: FamilySpec
+    config: Configuration
+    fit_excitation: str
+    runs: tuple[RunSignal, ...]
+    key: str
+
+
+def plan_fits(
+    dataset: pd.DataFrame,
+    families: Sequence[FamilySpec],
+    configs: Sequence[Configuration],
+    *,
+    fit_excitations: Sequence[str],
+    input_col: str = "input",
+    output_col: str = "output",
+) -> list[FitTask]:
+    """One task per family x configuration x identification excitation present in the data."""
+    check_dataset(dataset, signals=(input_col, output_col))
+    if not families:
+        raise PipelineError("no model family selected")
+    tasks: list[FitTask] = []
+    for config in configs:
+        by_kind = run_signals(config_rows(dataset, config), input_col=input_col,
+                              output_col=output_col)
+        for kind in fit_excitations:
+            runs = by_kind.get(kind)
+            if not runs:
+                warnings.warn(f"{config.label}: no {kind!r} run to identify on, skipped",
+                              stacklevel=2)
+                continue
+            # Hysteresis models carry a state: identify on one record, never a concatenation
+            # of records that each start from rest. With several runs, the first one is used.
+            run = runs[0]
+            for fam in families:
+                key = cache.combine({
+                    "stage": "fit", "family": fam.name, "config": dict(fam.config),
+                    "code": fam.code_hash, "data": run.data_hash,
+                    "signals": [input_col, output_col],
+                })
+                tasks.append(FitTask(fam, config, kind, (run,), key))
+    if not tasks:
+        raise PipelineError(
+            f"nothing to fit: no run of excitation(s) {list(fit_excitations)} in the "
+            f"selected configurations {[c.label for c in configs]}"
+        )
+    return tasks
+
+
+def fit_task(task: FitTask) -> dict[str, Any]:
+    """Identify one model; a failure is recorded in the row (``error``), never raised."""
+    run = task.runs[0]
+    row: dict[str, Any] = {
+        "family": task.family.name, **task.config.as_dict(),
+        "fit_excitation": task.fit_excitation,
+        "fit_run_ids": ",".join(r.run_id for r in task.runs),
+        "n_samples": int(run.u.size), "key": task.key, "model_json": None,
+        "params_json": json.dumps(dict(task.family.config), sort_keys=True, default=str),
+        "fit_seconds": float("nan"), "error": None, "cached": False,
+    }
+    start = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = task.family.build(task.family.config)
+            model.fit(run.u, run.y)
+        row["model_json"] = model.to_json(indent=None)
+    except Exception as exc:  # noqa: BLE001 - one bad fit must not stop the other 119
+        row["error"] = f"{type(exc).__name__}: {exc}"
+    row["fit_seconds"] = time.perf_counter() - start
+    return row
+
+
+def fit_models(
+    tasks: Sequence[FitTask],
+    *,
+    previous: pd.DataFrame | None = None,
+    n_jobs: int = 1,
+    progress: bool = False,
+    runner: Callable[[Callable[[FitTask], dict[str, Any]], Sequence[FitTask]],
+                     list[dict[str, Any]]] | None = None,
+) -> pd.DataFrame:
+    """Fit every task whose key is not in ``previous`` (earlier results); reuse the rest.
+
+    ``runner`` maps ``fit_task`` over the tasks still to do (joblib in the entry point);
+    by default they run in this process.
+    """
+    done: dict[str, dict[str, Any]] = {}
+    if previous is not None and not previous.empty:
+        for rec in previous.to_dict("records"):
+            done[str(rec["key"])] = rec
+    todo = [t for t in tasks if t.key not in done]
+    if runner is not None and todo:
+        fresh = runner(fit_task, todo)
+    else:
+        fresh = [fit_task(t) for t in _progress(todo, progress, "fit")]
+    by_key = {r["key"]: r for r in fresh}
+    rows = []
+    for t in tasks:
+        if t.key in by_key:
+            rows.append(by_key[t.key])
+        else:
+            rows.append({**done[t.key], "cached": True})
+    return fits_frame(rows)
+
+
+def fits_frame(rows: Iterable[Mapping[str, Any]]) -> pd.DataFrame:
+    frame = pd.DataFrame(list(rows), columns=list(FIT_COLUMNS))
+    frame["n_samples"] = frame["n_samples"].astype("int64")
+    frame["cached"] = frame["cached"].astype(bool)
+    for col in ("curve_angle_deg", "radius_mm", "fit_seconds"):
+        frame[col] = pd.to_numeric(frame[col], errors="coerce").astype("float64")
+    return frame
+
+
+def load_model(model_json: str) -> HysteresisModel:
+    return HysteresisModel.from_json(model_json)
+
+
+def _progress(items: Sequence[Any], enabled: bool, desc: str) -> Iterable[Any]:
+    if not enabled:
+        return items
+    from tqdm import tqdm
+
+    return tqdm(items, desc=desc, unit="model")
+
+
+# --------------------------------------------------------------------------------------
+# validate
+# --------------------------------------------------------------------------------------
+
+
+def validation_key(
+    fits: pd.DataFrame, signals: Mapping[str, list[RunSignal]], settings: Mapping[str, Any]
+) -> str:
+    """Key of one configuration's evaluation: the models, the evaluation data, the settings."""
+    return cache.combine({
+        "stage": "validate",
+        "models": sorted(fits["key"].astype(str)),
+        "data": sorted(r.data_hash for runs in signals.values() for r in runs),
+        "settings": dict(settings),
+    })
+
+
+def eval_excitations_for(
+    fit_excitation: str, available: Iterable[str], *, heldout: Sequence[str], cross: bool
+) -> list[tuple[str, str]]:
+    """(evaluation excitation, split) pairs for one model.
+
+    Always the identification excitation itself (split ``fit``); then the requested held-out
+    kinds, or with ``cross`` every other kind present (the full cross-excitation matrix).
+    """
+    present = sorted(set(available))
+    pairs = [(fit_excitation, "fit")] if fit_excitation in present else []
+    others = [k for k in present if k != fit_excitation] if cross else [
+        k for k in heldout if k != fit_excitation and k in present
+    ]
+    pairs += [(k, "heldout") for k in others]
+    return pairs
+
+
+def evaluate_configuration(
+    fits: pd.DataFrame,
+    signals: Mapping[str, list[RunSignal]],
+    *,
+    heldout: Sequence[str],
+    cross: bool = False,
+) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
+    """Predict every run of one configuration with every fitted model of it.
+
+    Returns (metrics rows, predictions in long format, error messages). A model predicts each
+    run from the rest state; the error statistics pool the samples of all runs of one
+    evaluation excitation.
+    """
+    metric_rows: list[dict[str, Any]] = []
+    pred_frames: list[pd.DataFrame] = []
+    errors: list[str] = []
+    for fit in fits.to_dict("records"):
+        if fit.get("model_json") is None or (isinstance(fit["model_json"], float)):
+            continue
+        model = load_model(str(fit["model_json"]))
+        ident = {"family": fit["family"], "rig": fit["rig"],
+                 "curve_angle_deg": fit["curve_angle_deg"], "radius_mm": fit["radius_mm"],
+                 "fit_excitation": fit["fit_excitation"]}
+        for kind, split in eval_excitations_for(
+            str(fit["fit_excitation"]), signals, heldout=heldout, cross=cross
+        ):
+            measured, predicted = [], []
+            try:
+                for run in signals[kind]:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        yhat = np.asarray(model.predict(run.u), dtype=np.float64)
+                    measured.append(run.y)
+                    predicted.append(yhat)
+                    pred_frames.append(pd.DataFrame({
+                        "family": fit["family"], "fit_excitation": fit["fit_excitation"],
+                        "eval_excitation": kind, "run_id": run.run_id, "t_s": run.t_s,
+                        "input": run.u, "output": run.y, "predicted": yhat,
+                    }))
+                stats = error_statistics(np.concatenate(measured), np.concatenate(predicted))
+            except Exception as exc:  # noqa: BLE001 - record and go on with the others
+                errors.append(f"{fit['family']} {ident['rig']} phi={ident['curve_angle_deg']} "
+                              f"r={ident['radius_mm']} on {kind}: {type(exc).__name__}: {exc}")
+                continue
+            metric_rows.append({**ident, "eval_excitation": kind, "split": split, **stats})
+    metrics = metrics_frame(metric_rows)
+    preds = (pd.concat(pred_frames, ignore_index=True) if pred_frames
+             else pd.DataFrame(columns=list(PREDICTION_COLUMNS)))
+    return metrics, preds, errors
+
+
+def metrics_frame(rows: Iterable[Mapping[str, Any]]) -> pd.DataFrame:
+    """Rows -> the metrics table with exactly :data:`METRICS_COLUMNS` and stable dtypes."""
+    frame = pd.DataFrame(list(rows), columns=list(METRICS_COLUMNS))
+    for col in ("family", "rig", "fit_excitation", "eval_excitation", "split"):
+        frame[col] = frame[col].astype("string")
+    frame["n"] = frame["n"].astype("int64")
+    for col in ("curve_angle_deg", "radius_mm", *METRIC_NAMES[1:]):
+        frame[col] = pd.to_numeric(frame[col], errors="coerce").astype("float64")
+    return frame
+
+
+def sort_metrics(metrics: pd.DataFrame) -> pd.DataFrame:
+    split_order = metrics["split"].map({"fit": 0, "heldout": 1})
+    return (metrics.assign(_s=split_order)
+            .sort_values(["rig", "curve_angle_deg", "radius_mm", "family", "fit_excitation",
+                          "_s", "eval_excitation"], kind="stable", na_position="first")
+            .drop(columns="_s").reset_index(drop=True))
+
+
+# --------------------------------------------------------------------------------------
+# report tables
+# --------------------------------------------------------------------------------------
+
+
+def gamma_weights_table(fits: pd.DataFrame, metrics: pd.DataFrame,
+                        *, family: str = "gamma") -> pd.DataFrame:
+    """The seed 001 Table 4.1 equivalent: weights Q and SSE per configuration.
+
+    Columns: rig, curve_angle_deg, radius_mm, fit_excitation, n_operators, thresholds (the
+    preassigned P, as a list), q1..qn, weights_sum, sse (on the identification record).
+    """
+    rows = []
+    ok = fits[(fits["family"] == family) & fits["model_json"].notna()]
+    sse = metrics[(metrics["family"] == family) & (metrics["split"] == "fit")]
+    sse_by = {(r.rig, _num(r.curve_angle_deg), _num(r.radius_mm), r.fit_excitation): r.sse
+              for r in sse.itertuples(index=False)}
+    width = 0
+    for fit in ok.to_dict("records"):
+        model = load_model(str(fit["model_json"]))
+        q = np.asarray(getattr(model, "weights_", []), dtype=np.float64).ravel()
+        p = np.asarray(getattr(model, "thresholds_", []), dtype=np.float64).ravel()
+        width = max(width, q.size)
+        key = (fit["rig"], _num(fit["curve_angle_deg"]), _num(fit["radius_mm"]),
+               fit["fit_excitation"])
+        row: dict[str, Any] = {
+            "rig": fit["rig"], "curve_angle_deg": fit["curve_angle_deg"],
+            "radius_mm": fit["radius_mm"], "fit_excitation": fit["fit_excitation"],
+            "n_operators": int(q.size), "thresholds": p.tolist(),
+        }
+        row.update({f"q{i + 1}": float(v) for i, v in enumerate(q)})
+        row["weights_sum"] = float(q.sum())
+        row["sse"] = float(sse_by.get(key, float("nan")))
+        rows.append(row)
+    cols = ["rig", "curve_angle_deg", "radius_mm", "fit_excitation", "n_operators",
+            "thresholds", *[f"q{i + 1}" for i in range(width)], "weights_sum", "sse"]
+    table = pd.DataFrame(rows, columns=cols)
+    return table.sort_values(["rig", "curve_angle_deg", "radius_mm", "fit_excitation"],
+                             kind="stable").reset_index(drop=True)
+
+
+def leaderboard(metrics: pd.DataFrame, *, metric: str = "rmse") -> pd.DataFrame:
+    """Families ranked per configuration by the mean held-out ``metric`` (1 = best).
+
+    Columns: rig, curve_angle_deg, radius_mm, fit_excitation, family, fit_<metric>,
+    heldout_<metric> (mean over the held-out excitations), rank.
+    """
+    if metric not in METRIC_NAMES:
+        raise PipelineError(f"unknown metric {metric!r}; known: {list(METRIC_NAMES)}")
+    keys = ["rig", "curve_angle_deg", "radius_mm", "fit_excitation", "family"]
+    m = metrics.copy()
+    for col in ("curve_angle_deg", "radius_mm"):
+        m[col] = m[col].fillna(-1.0)  # groupby drops NaN keys otherwise
+    fit = m[m["split"] == "fit"].groupby(keys, observed=True)[metric].mean()
+    held = m[m["split"] == "heldout"].groupby(keys, observed=True)[metric].mean()
+    board = pd.concat({f"fit_{metric}": fit, f"heldout_{metric}": held}, axis=1).reset_index()
+    score = board[f"heldout_{metric}"].fillna(board[f"fit_{metric}"])
+    board["rank"] = (score.groupby([board[k] for k in keys[:-1]]).rank(method="min")
+                     .astype("int64"))
+    for col in ("curve_angle_deg", "radius_mm"):
+        board[col] = board[col].replace(-1.0, np.nan)
+    return board.sort_values([*keys[:-1], "rank", "family"], kind="stable").reset_index(drop=True)
+
+
+def family_summary(board: pd.DataFrame, *, metric: str = "rmse") -> pd.DataFrame:
+    """One row per family over all configurations: wins, mean rank, median errors."""
+    g = board.groupby("family", observed=True)
+    summary = pd.DataFrame({
+        "configurations": g.size(),
+        "wins": g["rank"].apply(lambda r: int((r == 1).sum())),
+        "mean_rank": g["rank"].mean(),
+        f"median_fit_{metric}": g[f"fit_{metric}"].median(),
+        f"median_heldout_{metric}": g[f"heldout_{metric}"].median(),
+    }).reset_index()
+    return summary.sort_values(["mean_rank", "family"], kind="stable").reset_index(drop=True)
+
+
+def play_operator_outputs(u: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
+    """Outputs w_i(k) of the elementary play operators gamma_i of seed 001 eq. 4.8.
+
+    One column per threshold p_i, from the rest state w_i(1) = 0: the output follows the input
+    when it is pushed down (v < w), stays while w <= v <= w + p, and follows v - p above.
+    Used for the weighted elementary operators plot (seed 001 Fig. 4.12).
+    """
+    v = np.asarray(u, dtype=np.float64)
+    p = np.asarray(thresholds, dtype=np.float64)
+    w = np.zeros((v.size, p.size))
+    prev = np.zeros(p.size)
+    for k in range(v.size):
+        cur = np.where(prev > v[k], v[k], np.where(v[k] > prev + p, v[k] - p, prev))
+        w[k] = cur
+        prev = cur
+    return w

@@ -1,0 +1,479 @@
+"""All MLflow glue of the pipeline, in one place.
+
+* The store is the ``tracking`` config group: by default a local SQLite file
+  ``sqlite:///<root>/mlflow.db`` with artifacts in ``<root>/mlartifacts``; a shared tracking
+  server (``tracking=server``) needs no code change.
+* One *parent* run per pipeline invocation (``make pipeline``, one stage, or one Hydra
+  multirun sweep); one nested *child* run per (family, configuration, identification
+  excitation) with the flattened config as params, consistent metric keys, tables, plots, the
+  model JSON and the ``.hydra`` folder.
+* Parallel writers: the store is created once, before any parallel job starts
+  (:func:`init_store`, or :class:`MlflowSweepCallback` for multiruns); every call retries on
+  SQLite's ``database is locked``.
+
+Only :class:`mlflow.MlflowClient` is used (no global "active run"), so several processes and
+nested runs never step on each other.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+import random
+import subprocess
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import pandas as pd
+
+log = logging.getLogger(__name__)
+
+#: Environment variable through which a parent run id reaches stage processes and sweep jobs.
+PARENT_ENV = "TSM_MLFLOW_PARENT_RUN_ID"
+#: File written into a Hydra sweep folder with the sweep's parent run id (fallback to the env).
+PARENT_FILE = "mlflow_parent_run_id"
+REPO_ROOT = Path(__file__).resolve().parents[1]
+#: Metric keys are ``<scope>.<metric>``; scope is ``fit``, ``heldout`` (mean over held-out
+#: excitations) or ``eval.<excitation>`` -- the same keys in every child run, so MLflow's
+#: compare view charts families against each other across configurations.
+MAX_PARAM_CHARS = 6000
+
+T = TypeVar("T")
+
+
+# --------------------------------------------------------------------------------------
+# configuration
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TrackingSettings:
+    """Where runs go. ``uri=None`` means the local SQLite store under ``root``."""
+
+    enabled: bool = True
+    uri: str | None = None
+    artifact_location: str | None = None
+    experiment: str = "tsm-hysteresis"
+    root: Path = REPO_ROOT
+
+    @property
+    def tracking_uri(self) -> str:
+        if self.uri:
+            return self.uri
+        return f"sqlite:///{(self.root / 'mlflow.db').resolve()}"
+
+    @property
+    def artifact_uri(self) -> str | None:
+        if self.artifact_location:
+            return self.artifact_location
+        if self.uri:  # a server decides where artifacts go (proxied artifact store)
+            return None
+        return (self.root / "mlartifacts").resolve().as_uri()
+
+
+def settings_from_config(tracking: Mapping[str, Any], *, root: str | Path) -> TrackingSettings:
+    """Build :class:`TrackingSettings` from the ``tracking`` config group."""
+    return TrackingSettings(
+        enabled=bool(tracking.get("enabled", True)),
+        uri=tracking.get("uri") or None,
+        artifact_location=tracking.get("artifact_location") or None,
+        experiment=str(tracking.get("experiment", "tsm-hysteresis")),
+        root=Path(root).resolve(),
+    )
+
+
+# --------------------------------------------------------------------------------------
+# retries
+# --------------------------------------------------------------------------------------
+
+
+def _is_transient(exc: BaseException) -> bool:
+    text = f"{type(exc).__name__}: {exc}".lower()
+    return any(s in text for s in (
+        "database is locked", "database table is locked", "temporarily_unavailable",
+        "unable to open database", "disk i/o error", "connection refused", "timed out",
+    ))
+
+
+def retry(fn: Callable[..., T], *args: Any, attempts: int = 8, **kwargs: Any) -> T:
+    """Call ``fn``; on a transient store error (SQLite lock ...) back off and try again."""
+    delay = 0.05
+    for attempt in range(1, attempts + 1):
+        try:
+            return fn(*args, **kwargs)
+        except Exception as exc:
+            if attempt == attempts or not _is_transient(exc):
+                raise
+            log.warning("MLflow store busy (%s); retry %d/%d", exc, attempt, attempts)
+            time.sleep(delay * (1 + random.random()))
+            delay = min(delay * 2, 2.0)
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+# --------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------
+
+
+def flatten(obj: Any, prefix: str = "") -> dict[str, str]:
+    """Nested dicts/lists -> ``{"a.b.0": "value"}`` strings (MLflow params)."""
+    out: dict[str, str] = {}
+    if isinstance(obj, Mapping):
+        for key, value in obj.items():
+            out.update(flatten(value, f"{prefix}{key}."))
+    elif isinstance(obj, (list, tuple)) and obj and any(isinstance(v, (Mapping, list, tuple))
+                                                         for v in obj):
+        for i, value in enumerate(obj):
+            out.update(flatten(value, f"{prefix}{i}."))
+    else:
+        text = "null" if obj is None else str(list(obj) if isinstance(obj, tuple) else obj)
+        out[prefix[:-1] if prefix else "value"] = text[:MAX_PARAM_CHARS]
+    return out
+
+
+@functools.lru_cache(maxsize=4)
+def git_commit(repo: Path = REPO_ROOT) -> str:
+    """Current commit (``+dirty`` when the work tree has changes); ``unknown`` outside git."""
+    try:
+        sha = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], check=True,
+                             capture_output=True, text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(repo), "status", "--porcelain",
+                                "--untracked-files=no"], check=True, capture_output=True,
+                               text=True, timeout=10).stdout.strip()
+        return f"{sha}+dirty" if dirty else sha
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def metric_key(scope: str, name: str) -> str:
+    return f"{scope}.{name}"
+
+
+def child_metrics(metrics: pd.DataFrame) -> dict[str, float]:
+    """One model's metrics rows -> MLflow metrics with the consistent keys.
+
+    ``fit.<m>`` on the identification record, ``eval.<excitation>.<m>`` per evaluation
+    excitation, ``heldout.<m>`` the mean over the held-out excitations.
+    """
+    from hysteresis.metrics import METRIC_NAMES
+
+    out: dict[str, float] = {}
+    for row in metrics.to_dict("records"):
+        for name in METRIC_NAMES:
+            value = float(row[name])
+            out[metric_key(f"eval.{row['eval_excitation']}", name)] = value
+            if row["split"] == "fit":
+                out[metric_key("fit", name)] = value
+    held = metrics[metrics["split"] == "heldout"]
+    if not held.empty:
+        for name in METRIC_NAMES:
+            out[metric_key("heldout", name)] = float(held[name].astype(float).mean())
+    return {k: v for k, v in out.items() if v == v}  # MLflow rejects nothing, NaN is noise
+
+
+# --------------------------------------------------------------------------------------
+# the tracker
+# --------------------------------------------------------------------------------------
+
+
+class Tracker:
+    """Thin, retrying wrapper around :class:`mlflow.MlflowClient` for one experiment."""
+
+    def __init__(self, settings: TrackingSettings) -> None:
+        self.settings = settings
+        self._client: Any = None
+        self._experiment_id: str | None = None
+
+    @property
+    def enabled(self) -> bool:
+        return self.settings.enabled
+
+    @property
+    def client(self) -> Any:
+        if self._client is None:
+            from mlflow import MlflowClient
+
+            self._client = MlflowClient(tracking_uri=self.settings.tracking_uri)
+        return self._client
+
+    @property
+    def experiment_id(self) -> str:
+        if self._experiment_id is None:
+            self._experiment_id = self.init_store()
+        return self._experiment_id
+
+    def init_store(self) -> str:
+        """Create the store (schema migrations) and the experiment; idempotent.
+
+        Call this in ONE process before parallel jobs start: concurrent first-time schema
+        creation is what breaks a SQLite store.
+        """
+        if self.settings.tracking_uri.startswith("sqlite:///"):
+            Path(self.settings.tracking_uri[len("sqlite:///"):]).parent.mkdir(
+                parents=True, exist_ok=True)
+        client = self.client
+        name = self.settings.experiment
+        exp = retry(client.get_experiment_by_name, name)
+        if exp is None:
+            try:
+                exp_id = retry(client.create_experiment, name,
+                               artifact_location=self.settings.artifact_uri)
+            except Exception:  # another process created it in between
+                exp = retry(client.get_experiment_by_name, name)
+                if exp is None:
+                    raise
+                exp_id = exp.experiment_id
+        else:
+            exp_id = exp.experiment_id
+        self._experiment_id = str(exp_id)
+        return self._experiment_id
+
+    # -- runs -------------------------------------------------------------------------
+    def start_run(self, name: str, *, parent_id: str | None = None,
+                  tags: Mapping[str, Any] | None = None) -> str:
+        all_tags = {"git_commit": git_commit(), **{k: str(v) for k, v in (tags or {}).items()}}
+        if parent_id:
+            all_tags["mlflow.parentRunId"] = parent_id
+        run = retry(self.client.create_run, self.experiment_id, run_name=name, tags=all_tags)
+        return str(run.info.run_id)
+
+    def end_run(self, run_id: str, *, status: str = "FINISHED") -> None:
+        retry(self.client.set_terminated, run_id, status=status)
+
+    def log(self, run_id: str, *, params: Mapping[str, Any] | None = None,
+            metrics: Mapping[str, float] | None = None,
+            tags: Mapping[str, Any] | None = None) -> None:
+        from mlflow.entities import Metric, Param, RunTag
+
+        ts = int(time.time() * 1000)
+        p = [Param(k, str(v)[:MAX_PARAM_CHARS]) for k, v in (params or {}).items()]
+        m = [Metric(k, float(v), ts, 0) for k, v in (metrics or {}).items()]
+        t = [RunTag(k, str(v)) for k, v in (tags or {}).items()]
+        # log_batch takes at most 100 params / 1000 metrics per call.
+        for i in range(0, max(len(p), len(m), len(t), 1), 100):
+            retry(self.client.log_batch, run_id, metrics=m[i:i + 100], params=p[i:i + 100],
+                  tags=t[i:i + 100])
+
+    def log_table(self, run_id: str, frame: pd.DataFrame, artifact_file: str) -> None:
+        retry(self.client.log_table, run_id, _jsonable(frame), artifact_file)
+
+    def log_text(self, run_id: str, text: str, artifact_file: str) -> None:
+        retry(self.client.log_text, run_id, text, artifact_file)
+
+    def log_artifact(self, run_id: str, path: Path, artifact_path: str | None = None) -> None:
+        path = Path(path)
+        if path.is_dir():
+            retry(self.client.log_artifacts, run_id, str(path), artifact_path)
+        elif path.exists():
+            retry(self.client.log_artifact, run_id, str(path), artifact_path)
+
+    def child_runs(self, parent_id: str) -> list[Any]:
+        return list(retry(self.client.search_runs, [self.experiment_id],
+                          filter_string=f"tags.mlflow.parentRunId = '{parent_id}'",
+                          max_results=5000))
+
+    def find_runs(self, filter_string: str, *, max_results: int = 1) -> list[Any]:
+        return list(retry(self.client.search_runs, [self.experiment_id],
+                          filter_string=filter_string, max_results=max_results,
+                          order_by=["attributes.start_time DESC"]))
+
+
+def _jsonable(frame: pd.DataFrame) -> pd.DataFrame:
+    out = frame.copy()
+    for col in out.columns:
+        if out[col].dtype == object or str(out[col].dtype) == "string":
+            out[col] = out[col].astype(object).where(out[col].notna(), None)
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# parent runs: one per invocation, shared by stage processes and sweep jobs
+# --------------------------------------------------------------------------------------
+
+
+def inherited_parent(sweep_dir: str | Path | None = None) -> str | None:
+    """The parent run id handed down by ``run_all`` or a sweep (env var, then sweep file)."""
+    env = os.environ.get(PARENT_ENV)
+    if env:
+        return env
+    if sweep_dir is not None:
+        marker = Path(sweep_dir) / PARENT_FILE
+        if marker.is_file():
+            return marker.read_text(encoding="utf-8").strip() or None
+    return None
+
+
+class StageRun:
+    """Context for one stage invocation: attach to an inherited parent or own a new one."""
+
+    def __init__(self, tracker: Tracker, stage: str, *, sweep_dir: str | Path | None = None,
+                 tags: Mapping[str, Any] | None = None) -> None:
+        self.tracker = tracker
+        self.stage = stage
+        self.parent_id: str | None = None
+        self._own = False
+        self._sweep_dir = sweep_dir
+        self._tags = dict(tags or {})
+
+    def __enter__(self) -> StageRun:
+        if not self.tracker.enabled:
+            return self
+        self.parent_id = inherited_parent(self._sweep_dir)
+        if self.parent_id is None:
+            self.parent_id = self.tracker.start_run(
+                self.stage, tags={"stage": self.stage, "kind": "parent", **self._tags})
+            self._own = True
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if self._own and self.parent_id is not None:
+            self.tracker.end_run(self.parent_id,
+                                 status="FAILED" if exc_type is not None else "FINISHED")
+
+
+def log_model_runs(
+    tracker: Tracker,
+    parent_id: str,
+    *,
+    fits: pd.DataFrame,
+    metrics: pd.DataFrame | None,
+    base_params: Mapping[str, Any],
+    tags: Mapping[str, Any],
+    hydra_dir: Path | None = None,
+    plots: Mapping[str, Iterable[Path]] | None = None,
+    stage: str = "pipeline",
+    progress: bool = False,
+) -> list[str]:
+    """One child run per fitted model (family x configuration x identification excitation).
+
+    ``plots`` maps a configuration label to the figure files to attach to each of its runs.
+    """
+    from pipelines.stages import Configuration
+
+    ids: list[str] = []
+    records: Iterable[dict[str, Any]] = fits.to_dict("records")
+    if progress:
+        from tqdm import tqdm
+
+        records = tqdm(records, total=len(fits), desc="mlflow", unit="run")
+    for fit in records:
+        config = Configuration(str(fit["rig"]), _num(fit["curve_angle_deg"]),
+                               _num(fit["radius_mm"]))
+        name = f"{fit['family']}/{config.label}/{fit['fit_excitation']}"
+        run_tags = {
+            **tags, "stage": stage, "kind": "model", "family": fit["family"],
+            "rig": config.rig, "configuration": config.label,
+            "curve_angle_deg": _tag_num(config.curve_angle_deg),
+            "radius_mm": _tag_num(config.radius_mm),
+            "fit_excitation": fit["fit_excitation"], "fit_run_ids": fit["fit_run_ids"],
+            "model_key": fit["key"], "status": "failed" if fit.get("error") else "ok",
+        }
+        run_id = tracker.start_run(name, parent_id=parent_id, tags=run_tags)
+        import json
+
+        family_params = flatten(json.loads(str(fit["params_json"])), "family.")
+        params = {**base_params, **family_params, "family.name": fit["family"]}
+        values: dict[str, float] = {"fit_seconds": float(fit["fit_seconds"]),
+                                    "n_samples": float(fit["n_samples"])}
+        mine = None
+        if metrics is not None and not metrics.empty:
+            mine = metrics[(metrics["family"] == fit["family"])
+                           & (metrics["rig"] == config.rig)
+                           & _eq(metrics["curve_angle_deg"], config.curve_angle_deg)
+                           & _eq(metrics["radius_mm"], config.radius_mm)
+                           & (metrics["fit_excitation"] == fit["fit_excitation"])]
+            values.update(child_metrics(mine))
+        tracker.log(run_id, params=params, metrics=values)
+        if mine is not None and not mine.empty:
+            tracker.log_table(run_id, mine.reset_index(drop=True), "metrics.json")
+        if fit.get("model_json"):
+            tracker.log_text(run_id, str(fit["model_json"]), "model/model.json")
+        if fit.get("error"):
+            tracker.log_text(run_id, str(fit["error"]), "error.txt")
+        for path in (plots or {}).get(config.label, ()):
+            tracker.log_artifact(run_id, Path(path), "plots")
+        if hydra_dir is not None and hydra_dir.is_dir():
+            tracker.log_artifact(run_id, hydra_dir, ".hydra")
+        tracker.end_run(run_id, status="FAILED" if fit.get("error") else "FINISHED")
+        ids.append(run_id)
+    return ids
+
+
+def _num(value: Any) -> float | None:
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        return None
+    return None if f != f else f
+
+
+def _tag_num(value: float | None) -> str:
+    if value is None:
+        return "NA"
+    return f"{value:g}"
+
+
+def _eq(column: pd.Series, value: float | None) -> pd.Series:
+    col = pd.to_numeric(column, errors="coerce")
+    return col.isna() if value is None else (col - value).abs() < 1e-9
+
+
+# --------------------------------------------------------------------------------------
+# Hydra multirun: one parent per sweep, created before any job starts
+# --------------------------------------------------------------------------------------
+
+try:
+    from hydra.experimental.callback import Callback as _HydraCallback
+except ImportError:  # pragma: no cover - hydra is a dependency
+    _HydraCallback = object  # type: ignore[assignment,misc]
+
+
+class MlflowSweepCallback(_HydraCallback):  # type: ignore[misc,valid-type]
+    """Hydra callback: before a multirun's jobs start, initialise the store and open the
+    sweep's parent run; every job (any launcher, any process) then logs under it.
+
+    The parent id travels by environment variable (inherited by joblib/loky workers) and by
+    a file in the sweep folder (for launchers whose jobs do not inherit the environment,
+    e.g. submitit on a shared file system).
+    """
+
+    def __init__(self) -> None:
+        self._tracker: Tracker | None = None
+        self._parent: str | None = None
+        self._prev_env: str | None = None
+
+    def on_multirun_start(self, config: Any, **kwargs: Any) -> None:
+        from omegaconf import OmegaConf
+
+        tracking = OmegaConf.to_container(config.get("tracking", {}), resolve=True) or {}
+        root = config.paths.root if "paths" in config else "."
+        settings = settings_from_config(tracking, root=root)  # type: ignore[arg-type]
+        if not settings.enabled:
+            return
+        self._tracker = Tracker(settings)
+        self._tracker.init_store()
+        task = config.hydra.job.name
+        overrides = list(config.hydra.overrides.task)
+        self._parent = self._tracker.start_run(
+            f"sweep:{task}",
+            tags={"stage": task, "kind": "parent", "sweep": "true",
+                  "sweep_dir": config.hydra.sweep.dir, "overrides": " ".join(overrides)},
+        )
+        sweep_dir = Path(config.hydra.sweep.dir)
+        sweep_dir.mkdir(parents=True, exist_ok=True)
+        (sweep_dir / PARENT_FILE).write_text(self._parent, encoding="utf-8")
+        self._prev_env = os.environ.get(PARENT_ENV)
+        os.environ[PARENT_ENV] = self._parent
+
+    def on_multirun_end(self, config: Any, **kwargs: Any) -> None:
+        if self._tracker is None or self._parent is None:
+            return
+        self._tracker.end_run(self._parent)
+        if self._prev_env is None:
+            os.environ.pop(PARENT_ENV, None)
+        else:
+            os.environ[PARENT_ENV] = self._prev_env

@@ -1,0 +1,240 @@
+"""Stage ``validate``: every fitted model predicts the runs of its own configuration.
+
+    python -m pipelines.validate
+    python -m pipelines.validate cross=true            # the full cross-excitation matrix
+
+Metrics for every (family, configuration, fit excitation, evaluation excitation) go to
+``${paths.reports}/metrics.parquet`` and ``metrics.csv`` (columns
+:data:`pipelines.stages.METRICS_COLUMNS`); the predictions, one parquet file per
+configuration under ``${paths.predictions}``, feed the report's plots. A configuration whose
+models and data are unchanged is read back from its predictions file instead of recomputed.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import hydra
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pipelines import stages
+from pipelines.common import (
+    Paths,
+    dataset_hash,
+    hydra_output_dir,
+    hydra_sweep_dir,
+    read_processed,
+    to_container,
+)
+from pipelines.fit import load_models
+from pipelines.stages import Configuration, RunSignal
+from rig_io.atomic import atomic_path, write_text_atomic
+
+log = logging.getLogger(__name__)
+META_KEY = b"tsm_validate"
+
+
+def prediction_path(predictions_dir: Path, config: Configuration) -> Path:
+    return predictions_dir / f"{config.label}.parquet"
+
+
+def read_prediction_meta(path: Path) -> dict[str, Any] | None:
+    """The cache record stored in a predictions file's parquet metadata (None if absent)."""
+    try:
+        meta = pq.read_schema(path).metadata or {}
+    except (OSError, pa.ArrowException):
+        return None
+    raw = meta.get(META_KEY)
+    return json.loads(raw) if raw else None
+
+
+def write_predictions(path: Path, preds: pd.DataFrame, record: Mapping[str, Any]) -> None:
+    """Predictions as parquet with the cache record (key, metrics, errors) in its metadata."""
+    table = pa.Table.from_pandas(preds, preserve_index=False)
+    meta = dict(table.schema.metadata or {})
+    meta[META_KEY] = json.dumps(record, allow_nan=True).encode()
+    table = table.replace_schema_metadata(meta)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+
+
+def validate_configuration(
+    fits: pd.DataFrame,
+    signals: Mapping[str, list[RunSignal]],
+    *,
+    heldout: Sequence[str],
+    cross: bool,
+    key: str,
+    path: Path,
+) -> tuple[pd.DataFrame, list[str]]:
+    """Evaluate one configuration and write its predictions file (a joblib task)."""
+    metrics, preds, errors = stages.evaluate_configuration(fits, signals, heldout=heldout,
+                                                           cross=cross)
+    for col in ("family", "fit_excitation", "eval_excitation", "run_id"):
+        if col in preds:
+            preds[col] = preds[col].astype("category")
+    record = {"key": key, "metrics": metrics.to_dict("records"), "errors": errors}
+    write_predictions(path, preds, record)
+    return metrics, errors
+
+
+def select_fits(fits: pd.DataFrame, configs: Sequence[Configuration],
+                fit_excitations: Sequence[str]) -> pd.DataFrame:
+    labels = {c.label for c in configs}
+    keep = fits.apply(
+        lambda r: Configuration(str(r["rig"]), stages._num(r["curve_angle_deg"]),
+                                stages._num(r["radius_mm"])).label in labels, axis=1
+    ) if not fits.empty else pd.Series([], dtype=bool)
+    out = fits[keep.astype(bool) & fits["fit_excitation"].isin(list(fit_excitations))]
+    return out.reset_index(drop=True)
+
+
+def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
+        fits: pd.DataFrame | None = None) -> tuple[pd.DataFrame, list[str]]:
+    """Hydra-free core: config in, (metrics table, error messages) out; writes the files.
+
+    ``fits`` defaults to every model file under ``${paths.models}`` in the selection.
+    """
+    paths = Paths.from_config(cfg["paths"])
+    if dataset is None:
+        dataset = read_processed(paths.processed)
+    sig = cfg.get("signals") or {}
+    input_col, output_col = str(sig.get("input", "input")), str(sig.get("output", "output"))
+    stages.check_dataset(dataset, signals=(input_col, output_col))
+    sel = cfg.get("config") or {}
+    configs = stages.configurations(dataset, rig=sel.get("rig"),
+                                    curve_angle_deg=sel.get("curve_angle_deg"),
+                                    radius_mm=sel.get("radius_mm"))
+    fit_excitations = list(cfg.get("fit_excitations", ["sine_decay"]))
+    if fits is None:
+        fits = load_models(paths.models)
+    fits = select_fits(fits, configs, fit_excitations)
+    if fits.empty:
+        raise stages.PipelineError(
+            f"no fitted model for the selected configurations and fit excitations "
+            f"{fit_excitations} under {paths.models}; run `make fit` first"
+        )
+    heldout = list(cfg.get("heldout", ["triangle_decay", "trapezoid_decay"]))
+    cross = bool(cfg.get("cross", False))
+    settings = {"heldout": heldout, "cross": cross, "signals": [input_col, output_col]}
+    use_cache = bool(cfg.get("cache", True))
+
+    start = time.perf_counter()
+    done: list[pd.DataFrame] = []
+    errors: list[str] = []
+    todo: list[tuple[pd.DataFrame, dict[str, list[RunSignal]], str, Path]] = []
+    by_label = {c.label: c for c in configs}
+    for label, group in fits.groupby(
+        fits.apply(lambda r: Configuration(str(r["rig"]), stages._num(r["curve_angle_deg"]),
+                                           stages._num(r["radius_mm"])).label, axis=1),
+        sort=True,
+    ):
+        config = by_label[str(label)]
+        signals = stages.run_signals(stages.config_rows(dataset, config), input_col=input_col,
+                                     output_col=output_col)
+        key = stages.validation_key(group, signals, settings)
+        path = prediction_path(paths.predictions, config)
+        meta = read_prediction_meta(path) if use_cache and path.exists() else None
+        if meta is not None and meta.get("key") == key:
+            done.append(stages.metrics_frame(meta["metrics"]))
+            errors.extend(meta.get("errors", []))
+        else:
+            todo.append((group, signals, key, path))
+    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg.get("n_jobs", 1))
+    results = _run_tasks(todo, heldout=heldout, cross=cross, n_jobs=n_jobs,
+                         progress=bool(cfg.get("progress", False)))
+    for metrics, errs in results:
+        done.append(metrics)
+        errors.extend(errs)
+    metrics = stages.sort_metrics(pd.concat(done, ignore_index=True)) if done else \
+        stages.metrics_frame([])
+    metrics = stages.metrics_frame(metrics.to_dict("records"))
+    write_metrics(metrics, paths)
+    write_text_atomic(paths.reports / "validate_errors.json", json.dumps(errors, indent=1))
+    log.info("validate: %d configurations (%d recomputed), %d metric rows in %.1f s",
+             len(done), len(todo), len(metrics), time.perf_counter() - start)
+    for e in errors:
+        log.warning("validate: %s", e)
+    return metrics, errors
+
+
+def _run_tasks(todo: Sequence[tuple[pd.DataFrame, dict[str, list[RunSignal]], str, Path]], *,
+               heldout: Sequence[str], cross: bool, n_jobs: int, progress: bool
+               ) -> list[tuple[pd.DataFrame, list[str]]]:
+    if not todo:
+        return []
+    if n_jobs == 1 or len(todo) == 1:
+        items: Any = todo
+        if progress:
+            from tqdm import tqdm
+
+            items = tqdm(todo, desc="validate", unit="config")
+        return [validate_configuration(g, s, heldout=heldout, cross=cross, key=k, path=p)
+                for g, s, k, p in items]
+    from joblib import Parallel, delayed
+
+    gen: Any = Parallel(n_jobs=n_jobs, return_as="generator")(
+        delayed(validate_configuration)(g, s, heldout=heldout, cross=cross, key=k, path=p)
+        for g, s, k, p in todo)
+    if progress:
+        from tqdm import tqdm
+
+        gen = tqdm(gen, total=len(todo), desc="validate", unit="config")
+    return list(gen)
+
+
+def write_metrics(metrics: pd.DataFrame, paths: Paths) -> None:
+    """``metrics.parquet`` and ``metrics.csv``, atomically, only when the content changed."""
+    from pipelines import cache
+
+    new_hash = cache.hash_frame(metrics)
+    if paths.metrics_parquet.exists() and paths.metrics_csv.exists():
+        try:
+            if cache.hash_frame(pd.read_parquet(paths.metrics_parquet)) == new_hash:
+                return
+        except (OSError, pa.ArrowException):
+            pass
+    with atomic_path(paths.metrics_parquet) as tmp:
+        metrics.to_parquet(tmp, index=False)
+    with atomic_path(paths.metrics_csv) as tmp:
+        metrics.to_csv(tmp, index=False)
+
+
+def main_cfg(cfg: Any) -> pd.DataFrame:
+    """What ``python -m pipelines.validate`` does with its composed config (also MLflow)."""
+    from pipelines import tracking
+
+    plain = to_container(cfg)
+    paths = Paths.from_config(plain["paths"])
+    metrics, errors = run(plain)
+    tracker = tracking.Tracker(tracking.settings_from_config(plain.get("tracking", {}),
+                                                             root=paths.root))
+    if tracker.enabled:
+        with tracking.StageRun(tracker, "validate", sweep_dir=hydra_sweep_dir()) as stage_run:
+            assert stage_run.parent_id is not None
+            tracker.log(stage_run.parent_id,
+                        params=tracking.flatten({k: v for k, v in plain.items()
+                                                 if k != "tracking"}),
+                        tags={"dataset_hash": dataset_hash(paths.processed)})
+            tracker.log_table(stage_run.parent_id, metrics, "metrics.json")
+            tracker.log_artifact(stage_run.parent_id, paths.metrics_csv, "tables")
+            hydra_dir = hydra_output_dir()
+            if hydra_dir is not None:
+                tracker.log_artifact(stage_run.parent_id, hydra_dir / ".hydra", ".hydra")
+    return metrics
+
+
+@hydra.main(config_path="../conf", config_name="validate", version_base="1.3")
+def main(cfg: Any) -> None:
+    main_cfg(cfg)
+
+
+if __name__ == "__main__":
+    main()
