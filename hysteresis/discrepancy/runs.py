@@ -32,6 +32,8 @@ class RunData:
     config: dict[str, Any] = field(default_factory=dict)
     excitation: str = ""
     role: str = "identification"
+    #: Sample indices where a new record starts (runs concatenated by :func:`concat_runs`).
+    starts: tuple[int, ...] = (0,)
 
     def __post_init__(self) -> None:
         self.t = as_1d(self.t, f"{self.run_id}: t")
@@ -73,8 +75,12 @@ class RunData:
 
     @cached_property
     def ts(self) -> FloatArray:
-        """Time since the start of the run, s."""
-        return np.asarray(self.t - self.t[0], dtype=np.float64)
+        """Time since the start of the run (of each concatenated record), s."""
+        out = np.empty(self.n)
+        edges = [*self.starts, self.n]
+        for a, b in zip(edges[:-1], edges[1:], strict=True):
+            out[a:b] = self.t[a:b] - self.t[a]
+        return out
 
     @cached_property
     def v(self) -> FloatArray:
@@ -105,4 +111,33 @@ class RunData:
             tension=None if self.tension is None else dec(self.tension),
             tension_out=None if self.tension_out is None else dec(self.tension_out),
             config=dict(self.config), excitation=self.excitation, role=self.role,
+            starts=tuple(sorted({int(np.ceil(s / factor)) for s in self.starts})),
         )
+
+
+def concat_runs(runs: list[RunData], *, run_id: str | None = None) -> RunData:
+    """Several records of one configuration as one run (time made continuous; each record's
+    time since start kept through ``starts``). Models see one long input sequence."""
+    if not runs:
+        raise HysteresisError("concat_runs needs at least one run")
+    if len(runs) == 1:
+        return runs[0]
+    ts, us, ys, t1, t2, starts = [], [], [], [], [], []
+    offset, n = 0.0, 0
+    for r in runs:
+        starts.append(n)
+        ts.append(r.t - r.t[0] + offset)
+        offset = float(ts[-1][-1]) + r.dt
+        us.append(r.u)
+        ys.append(r.y)
+        t1.append(r.tension)
+        t2.append(r.tension_out)
+        n += r.n
+    cat = np.concatenate
+    return RunData(
+        run_id=run_id or "+".join(r.run_id for r in runs), t=cat(ts), u=cat(us), y=cat(ys),
+        tension=None if any(x is None for x in t1) else cat([x for x in t1 if x is not None]),
+        tension_out=None if any(x is None for x in t2) else cat([x for x in t2 if x is not None]),
+        config=dict(runs[0].config), excitation="+".join(r.excitation for r in runs),
+        role=runs[0].role, starts=tuple(starts),
+    )

@@ -34,7 +34,7 @@ from hysteresis.discrepancy.effects import (
     fit_with_effect,
 )
 from hysteresis.discrepancy.locate import autocorrelation, locate
-from hysteresis.discrepancy.runs import RunData
+from hysteresis.discrepancy.runs import RunData, concat_runs
 
 
 @dataclass
@@ -72,14 +72,14 @@ def group_runs(runs: Sequence[RunData]) -> list[Group]:
     for key, rs in by.items():
         ident = [r for r in rs if r.role == "identification"]
         held = [r for r in rs if r.role == "heldout"]
-        if len(ident) != 1:
-            raise HysteresisError(
-                f"configuration {key}: need exactly one identification run, got {len(ident)} "
-                f"({', '.join(r.run_id for r in ident) or 'none'})"
-            )
+        if not ident:
+            raise HysteresisError(f"configuration {key}: no identification run "
+                                  f"(runs: {', '.join(r.run_id for r in rs)})")
         if not held:
-            raise HysteresisError(f"configuration {key}: no held-out run to judge on")
-        groups.append(Group(key, ident[0], held))
+            raise HysteresisError(f"configuration {key}: no held-out run to judge on "
+                                  f"(runs: {', '.join(r.run_id for r in rs)})")
+        # Several identification records of one configuration are fitted as one sequence.
+        groups.append(Group(key, concat_runs(ident), held))
     if not groups:
         raise HysteresisError("no runs given")
     return groups

@@ -1,0 +1,319 @@
+"""Stage ``discrepancy``: find where model and measurement disagree, name the missing effect,
+add it, show the gap shrink (issue 7; method in ``docs/discrepancy.md``).
+
+    python -m pipelines.discrepancy source=<dir of raw runs or bags> report=<file.json>
+
+The source is ingested into a temporary folder with the ingest stage's functions (so a source
+of raw runs, bags or foreign logs all work and nothing is written next to them), the runs are
+grouped by configuration, the base family is fitted on the identification excitation and
+judged on the held-out ones by :func:`hysteresis.discrepancy.workflow.run_workflow`. Outputs:
+the report JSON (atomic), before/after plots beside it, one MLflow run with the metrics, the
+plots and the report.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import tempfile
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from hysteresis.base import HysteresisError
+from hysteresis.discrepancy.runs import RunData
+from hysteresis.discrepancy.workflow import (
+    WorkflowSettings,
+    base_factory_for,
+    run_workflow,
+    strip_private,
+)
+from rig_io.atomic import atomic_path, write_text_atomic
+
+log = logging.getLogger(__name__)
+HELDOUT_ROLES = ("held_out", "heldout", "validation", "test")
+
+
+class DiscrepancyError(Exception):
+    """Bad source or configuration for the discrepancy stage."""
+
+
+# -- data ---------------------------------------------------------------------------------
+
+def ingest_source(source: str | Path, workdir: Path, *, mapping: Mapping[str, Any] | None = None,
+                  progress: bool = False) -> tuple[pd.DataFrame, dict[str, dict[str, Any]],
+                                                   dict[str, Any]]:
+    """Ingest ``source`` into ``workdir``; return (rows, per-run metadata, ingest report)."""
+    from pipelines.ingest import run_ingest
+    from rig_io.dataset import read_dataset, read_runs
+
+    src = Path(source)
+    if not src.exists():
+        raise DiscrepancyError(f"source {src} does not exist")
+    rep = run_ingest(src, workdir, mapping=dict(mapping) if mapping else None, progress=progress)
+    if not rep["n_accepted"]:
+        reasons = "; ".join(r["reason"] for r in rep["rejected"][:5])
+        raise DiscrepancyError(f"no run of {src} could be ingested ({reasons or 'no runs found'})")
+    return read_dataset(workdir), read_runs(workdir), rep
+
+
+def _role(meta: Mapping[str, Any], kind: str, identify: set[str]) -> str:
+    exc = (meta.get("manifest") or {}).get("excitation") or meta.get("excitation") or {}
+    role = str(exc.get("role", "")).lower() if isinstance(exc, Mapping) else ""
+    if role:
+        return "heldout" if role in HELDOUT_ROLES else "identification"
+    return "identification" if kind in identify else "heldout"
+
+
+def _finite(col: pd.Series) -> np.ndarray | None:
+    arr = col.to_numpy(dtype=float)
+    return arr if np.isfinite(arr).all() else None
+
+
+def runs_from_dataset(rows: pd.DataFrame, meta: Mapping[str, Mapping[str, Any]], *,
+                      identify_excitations: list[str], input_col: str = "input",
+                      output_col: str = "output",
+                      rate_hz: float | None = None) -> list[RunData]:
+    """The processed rows as :class:`RunData` (configuration, role, tension, decimation)."""
+    for c in (input_col, output_col):
+        if c not in rows:
+            raise DiscrepancyError(f"dataset has no column {c!r}")
+    out = []
+    identify = set(identify_excitations)
+    for run_id, df in rows.groupby("run_id", sort=True):
+        kind = str(df["excitation"].iloc[0])
+        config: dict[str, Any] = {"rig": str(df["rig"].iloc[0])}
+        for c in ("curve_angle_deg", "radius_mm"):
+            v = float(df[c].iloc[0])
+            if math.isfinite(v):
+                config[c] = v
+        tension = _finite(df["tension_in_n"])
+        if tension is None and "tension_proxy" in df:
+            tension = _finite(df["tension_proxy"])
+        run = RunData(
+            run_id=str(run_id), t=df["t_s"].to_numpy(float), u=df[input_col].to_numpy(float),
+            y=df[output_col].to_numpy(float), tension=tension,
+            tension_out=_finite(df["tension_out_n"]), config=config, excitation=kind,
+            role=_role(meta.get(str(run_id), {}), kind, identify),
+        )
+        if rate_hz:
+            run = run.decimated(max(1, int(round(1.0 / (rate_hz * run.dt)))))
+        out.append(run)
+    return out
+
+
+# -- base family ----------------------------------------------------------------------------
+
+def choose_base(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
+                ) -> tuple[str, dict[str, Any], dict[str, float]]:
+    """The family of ``families`` with the lowest held-out RMSE (the best standard family)."""
+    from hysteresis.discrepancy.effects import ComposedModel
+    from hysteresis.discrepancy.workflow import evaluate, group_runs
+
+    groups = group_runs(runs)
+    scores: dict[str, float] = {}
+    specs: dict[str, tuple[str, dict[str, Any]]] = {}
+    for label, spec in families.items():
+        params = dict(spec or {})
+        name = str(params.pop("family", label))
+        try:
+            factory = base_factory_for(name, **params)
+            models = {g.key: ComposedModel(factory).fit(g.ident) for g in groups}
+            _, e_h = evaluate(models, groups).errors(groups)
+            score = float(np.sqrt(np.mean(e_h**2)))
+        except Exception as err:  # a family that cannot fit this data is simply not chosen
+            log.warning("base family %s skipped: %s", label, err)
+            continue
+        if math.isfinite(score):
+            scores[label] = score
+            specs[label] = (name, params)
+    if not scores:
+        raise DiscrepancyError("no base family could be fitted to this source")
+    best = min(scores, key=scores.__getitem__)
+    return specs[best][0], specs[best][1], scores
+
+
+# -- plots ----------------------------------------------------------------------------------
+
+def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
+    """Before/after loops and residuals per held-out run, located segments shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    evs = report["_evaluations"]
+    first, last = evs[0], evs[-1]
+    segs = report["located"][0]["segments"] if report["located"] else []
+    files: list[Path] = []
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for g in report["_groups"]:
+        runs = [g.ident, *g.heldout]
+        fig, axes = plt.subplots(len(runs), 2, figsize=(12, 3.2 * len(runs)), squeeze=False)
+        for ax, run in zip(axes, runs, strict=True):
+            p0 = first.ident_pred.get(run.run_id, first.held_pred.get(run.run_id))
+            p1 = last.ident_pred.get(run.run_id, last.held_pred.get(run.run_id))
+            ax[0].plot(run.u, run.y, "k", lw=0.8, label="measured")
+            ax[0].plot(run.u, p0, "C0", lw=0.8, label="base")
+            ax[0].plot(run.u, p1, "C3", lw=0.8, ls="--", label="base + effects")
+            ax[0].set_xlabel("input")
+            ax[0].set_ylabel("output")
+            ax[0].set_title(f"{run.run_id} ({run.role})", fontsize=9)
+            ax[0].legend(fontsize=7)
+            ax[1].plot(run.ts, run.y - p0, "C0", lw=0.7, label="residual, base")
+            ax[1].plot(run.ts, run.y - p1, "C3", lw=0.7, label="residual, base + effects")
+            for s in segs:
+                if s["run_id"] == run.run_id:
+                    ax[1].axvspan(s["t_start_s"], s["t_end_s"], color="orange", alpha=0.2)
+            ax[1].set_xlabel("time since start (s)")
+            ax[1].legend(fontsize=7)
+        names = [e["name"] for e in report["effects"]] or ["no missing effect"]
+        fig.suptitle(f"{report['base_family']} + {', '.join(names)} | {g.key}", fontsize=10)
+        fig.tight_layout()
+        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in g.key)
+        path = out_dir / f"discrepancy_{safe}.png"
+        with atomic_path(path, suffix=".png") as tmp:
+            fig.savefig(tmp, dpi=90, format="png")
+        plt.close(fig)
+        files.append(path)
+    return files
+
+
+# -- the stage ------------------------------------------------------------------------------
+
+def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """Run the stage from a plain config mapping; returns the JSON report (also written)."""
+    t0 = time.perf_counter()
+    if not cfg.get("source"):
+        raise DiscrepancyError("source=<dir of raw runs or bags> is required")
+    if not cfg.get("report"):
+        raise DiscrepancyError("report=<file.json> is required")
+    report_path = Path(str(cfg["report"])).resolve()
+    progress = bool(cfg.get("progress", True))
+    mapping = cfg.get("importer")
+    with tempfile.TemporaryDirectory(prefix="tsm-discrepancy-") as tmp:
+        rows, meta, ingest_rep = ingest_source(cfg["source"], Path(tmp), mapping=mapping,
+                                               progress=progress)
+    sig = dict(cfg.get("signals") or {})
+    runs = runs_from_dataset(
+        rows, meta, identify_excitations=list(cfg.get("identify_excitations") or ["sine_decay"]),
+        input_col=str(sig.get("input", "input")), output_col=str(sig.get("output", "output")),
+        rate_hz=cfg.get("analysis_rate_hz"))
+    base = str(cfg.get("base_family", "auto"))
+    base_params = dict(cfg.get("base_params") or {})
+    auto_scores: dict[str, float] = {}
+    if base == "auto":
+        base, base_params, auto_scores = choose_base(runs, dict(cfg.get("auto_families") or {}))
+    try:
+        factory = base_factory_for(base, **base_params)
+    except HysteresisError as err:
+        raise DiscrepancyError(str(err)) from None
+    wf = dict(cfg.get("workflow") or {})
+    settings = WorkflowSettings(
+        candidates=tuple(wf.get("candidates") or WorkflowSettings.candidates),
+        max_effects=int(wf.get("max_effects", 3)),
+        min_relative_gain=float(wf.get("min_relative_gain", 0.2)),
+        max_delta_bic=float(wf.get("max_delta_bic", -10.0)),
+        min_runs_improved=float(wf.get("min_runs_improved", 0.5)),
+        noise_factor=float(wf.get("noise_factor", 2.0)),
+        progress=progress,
+    )
+    full = run_workflow(runs, factory, base_name=base, settings=settings)
+    report = strip_private(full)
+    report["base_params"] = base_params
+    report["base_selection"] = auto_scores or None
+    report["source"] = str(Path(str(cfg["source"])).resolve())
+    report["ingest"] = {"accepted": ingest_rep["n_accepted"], "rejected": ingest_rep["rejected"]}
+    report["headline"] = headline(report)
+    plots = plot_report(full, report_path.parent / f"{report_path.stem}_plots") \
+        if cfg.get("plots", True) else []
+    report["plots"] = [str(p) for p in plots]
+    report["elapsed_s"] = round(time.perf_counter() - t0, 3)
+    write_text_atomic(report_path, json.dumps(report, indent=1, default=_json_default) + "\n")
+    _track(cfg, report, report_path, plots)
+    log.info("%s", report["headline"])
+    return report
+
+
+def headline(report: Mapping[str, Any]) -> str:
+    """One sentence: which effect was added and by how much it cut the held-out error."""
+    if not report["effects"]:
+        return (f"no missing effect: no candidate term beats the noise on the held-out runs "
+                f"(base {report['base_family']}, held-out RMSE "
+                f"{report['summary']['heldout_rmse_before']:.4g})")
+    parts = []
+    for e in report["effects"]:
+        cut = 1.0 - e["heldout_rmse_after"] / e["heldout_rmse_before"]
+        parts.append(f"{e['name']} (held-out RMSE {e['heldout_rmse_before']:.4g} -> "
+                     f"{e['heldout_rmse_after']:.4g}, -{100 * cut:.1f} %)")
+    return f"base {report['base_family']} is missing: " + "; then ".join(parts)
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return str(obj)
+
+
+def _track(cfg: Mapping[str, Any], report: Mapping[str, Any], report_path: Path,
+           plots: list[Path]) -> None:
+    tracking = dict(cfg.get("tracking") or {})
+    if not tracking.get("enabled", False):
+        return
+    from pipelines.tracking import StageRun, Tracker, settings_from_config
+
+    root = (cfg.get("paths") or {}).get("root", ".")
+    tracker = Tracker(settings_from_config(tracking, root=root))
+    with StageRun(tracker, "discrepancy") as stage:
+        run_id = tracker.start_run("discrepancy", parent_id=stage.parent_id,
+                                   tags={"stage": "discrepancy", "kind": "analysis",
+                                         "verdict": report["verdict"]})
+        try:
+            s = report["summary"]
+            metrics = {
+                "before.rmse": s["rmse_before"], "after.rmse": s["rmse_after"],
+                "before.heldout_rmse": s["heldout_rmse_before"],
+                "after.heldout_rmse": s["heldout_rmse_after"],
+                "heldout_reduction": s["heldout_reduction"],
+                "n_effects": float(len(report["effects"])),
+            }
+            for i, e in enumerate(report["effects"]):
+                metrics[f"effect{i + 1}.heldout_rmse_after"] = e["heldout_rmse_after"]
+            params = {"source": report["source"], "base_family": report["base_family"],
+                      "base_params": json.dumps(report["base_params"]),
+                      "effects": ",".join(e["name"] for e in report["effects"]) or "none",
+                      **{f"workflow.{k}": v for k, v in (cfg.get("workflow") or {}).items()}}
+            tracker.log(run_id, params=params,
+                        metrics={k: float(v) for k, v in metrics.items() if math.isfinite(v)})
+            tracker.log_artifact(run_id, report_path, "reports")
+            for p in plots:
+                tracker.log_artifact(run_id, p, "plots")
+        except Exception:
+            tracker.end_run(run_id, status="FAILED")
+            raise
+        tracker.end_run(run_id)
+
+
+def _main() -> None:
+    import hydra
+    from omegaconf import DictConfig
+
+    from pipelines.common import to_container
+
+    @hydra.main(config_path="../conf", config_name="discrepancy", version_base="1.3")
+    def main(cfg: DictConfig) -> None:
+        rep = run(to_container(cfg))
+        print(rep["headline"])
+
+    main()
+
+
+if __name__ == "__main__":
+    _main()
