@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from threadpoolctl import threadpool_limits
 
 from hysteresis.base import (
     FloatArray,
@@ -145,11 +146,13 @@ class GammaModel(HysteresisModel):
         c[:n] = 1.0  # constraint row: sum of the weights (the offset is not constrained)
         if a.shape[0] < a.shape[1]:
             raise HysteresisError(f"need at least {a.shape[1]} samples to fit, got {a.shape[0]}")
-        if self.constraint == "free":
-            x, *_ = np.linalg.lstsq(a, yy, rcond=None)
-            lam = float("nan")
-        else:
-            x, lam = constrained_lstsq(a, yy, c, 1.0)
+        # tiny dense problem: BLAS threads only add contention (fits run in parallel)
+        with threadpool_limits(limits=1, user_api="blas"):
+            if self.constraint == "free":
+                x, *_ = np.linalg.lstsq(a, yy, rcond=None)
+                lam = float("nan")
+            else:
+                x, lam = constrained_lstsq(a, yy, c, 1.0)
         resid = a @ x - yy
         self.thresholds_ = p
         self.weights_ = np.ascontiguousarray(x[:n])

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import qr as scipy_qr
 from scipy.optimize import least_squares, nnls
+from threadpoolctl import threadpool_limits
 
 from hysteresis.base import (
     FloatArray,
@@ -212,10 +213,13 @@ class PreisachModel(HysteresisModel):
         every = int(self.fit_every)
         rows, _ = relay_states(uu, self.alpha_, self.beta_, float(self.ramp_width_), r0, every)
         target = yy[::every]
-        if self.density == "nonparametric":
-            self._fit_nonparametric(rows, target, uu[::every])
-        else:
-            self._fit_parametric(rows, target, uu)
+        # Small dense algebra: BLAS threads only add contention (the pipeline already fits
+        # configurations in parallel), so identification runs single-threaded.
+        with threadpool_limits(limits=1, user_api="blas"):
+            if self.density == "nonparametric":
+                self._fit_nonparametric(rows, target, uu[::every])
+            else:
+                self._fit_parametric(rows, target, uu)
         self.sse_ = float(np.sum((self.predict(uu) - yy) ** 2))
         return self
 
