@@ -45,10 +45,10 @@ StepFn = Callable[[float], Mapping[str, float]]
 __all__ = [
     "CHParams", "CameraModel", "FamilyStepper", "GAMMA_METHODS", "InverseStepper", "LoopResult",
     "ModelErrorUKF", "PlayBank", "PlayBankStepper", "StrokeLimits", "as_stepper", "ch_simulate",
-    "fit_coleman_hodgdon_ga", "fit_play_bank", "gamma_inverse", "gamma_step_inverse",
-    "mixed_sine_profile", "reduction", "run_ame_pd", "run_inverse_with_error_correction",
-    "run_open_loop", "run_vision_feedback", "seed000_target", "seed002_motion",
-    "segment_statistics", "sine_profile", "triangle_profile",
+    "estimate_model_error", "fit_coleman_hodgdon_ga", "fit_play_bank", "gamma_inverse",
+    "gamma_step_inverse", "mixed_sine_profile", "play_bank_from", "reduction", "run_ame_pd",
+    "run_inverse_with_error_correction", "run_open_loop", "run_vision_feedback", "seed000_target",
+    "seed002_motion", "segment_statistics", "sine_profile", "triangle_profile",
 ]
 
 
@@ -755,13 +755,24 @@ class FamilyStepper:
     ``invert_step(y, state) -> (u, state)`` (the Bouc-Wen family does)."""
 
     def __init__(self, model: Any) -> None:
-        for name in ("initial_state", "step", "invert_step"):
+        for name in ("initial_state", "invert_step"):
             if not callable(getattr(model, name, None)):
                 raise HysteresisError(
                     f"{type(model).__name__} has no {name}(); it cannot be stepped online"
                 )
+        if not any(callable(getattr(model, m, None)) for m in ("step", "simulate")):
+            raise HysteresisError(
+                f"{type(model).__name__} has neither step() nor simulate(); cannot step it"
+            )
         self.model = model
         self.reset(0.0)
+
+    def _forward(self, u: float, state: Any) -> tuple[float, Any]:
+        if callable(getattr(self.model, "step", None)):
+            y, st = self.model.step(u, state)
+            return float(y), st
+        ys, st = self.model.simulate(np.array([u]), state=state)
+        return float(ys[0]), st
 
     def reset(self, u0: float) -> None:
         self.state = self.model.initial_state(u0)
@@ -772,8 +783,20 @@ class FamilyStepper:
         u = float(u)
         if not low <= u <= high or not math.isfinite(u):
             u = min(max(u, low), high) if math.isfinite(u) else min(max(0.0, low), high)
-        y, self.state = self.model.step(u, prev)  # re-run: the state of the applied command
-        return u, float(y)
+        y, self.state = self._forward(u, prev)  # re-run: the state of the applied command
+        return u, y
+
+
+def play_bank_from(model: Any) -> PlayBank:
+    """The :class:`PlayBank` of a fitted Gamma family (``thresholds_``, ``weights_``,
+    ``offset_``), so the Table 4.4 solvers and our exact inverse run on the family's fit."""
+    try:
+        return PlayBank(np.asarray(model.thresholds_, dtype=np.float64),
+                        np.asarray(model.weights_, dtype=np.float64), float(model.offset_))
+    except AttributeError as exc:
+        raise HysteresisError(
+            f"{type(model).__name__} is not a fitted Gamma model ({exc})"
+        ) from None
 
 
 def as_stepper(model: Any) -> InverseStepper:
