@@ -1,0 +1,186 @@
+"""Commanded trajectories of the format's excitation kinds, at the 10 ms control rate."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+EXCITATION_KINDS = ("sine_decay", "triangle_decay", "trapezoid_decay", "ramp", "sine",
+                    "sine_decay_offset", "mixed_sine", "free")
+
+_REQUIRED: dict[str, tuple[str, ...]] = {
+    "sine_decay": ("amplitudes_mm", "periods_per_amplitude", "frequency_hz"),
+    "sine_decay_offset": ("amplitudes_mm", "periods_per_amplitude", "frequency_hz", "offset"),
+    "triangle_decay": ("amplitudes_mm", "periods_per_amplitude", "slope_mm_s"),
+    "trapezoid_decay": ("amplitudes_mm", "periods_per_amplitude", "slope_mm_s", "dwell_s"),
+    "ramp": ("velocity_mm_s", "stroke_mm"),
+    "sine": ("amplitude", "offset", "frequency_hz"),
+    "mixed_sine": ("terms",),
+    "free": ("t_s", "command"),
+}
+#: Extra (non-format) parameters some kinds accept.
+_OPTIONAL: dict[str, tuple[str, ...]] = {
+    "sine": ("duration_s",), "mixed_sine": ("duration_s",), "ramp": ("dwell_s",),
+}
+
+
+def _positive(name: str, value: Any) -> float:
+    v = float(value)
+    if not np.isfinite(v) or v <= 0.0:
+        raise ValueError(f"excitation parameter {name!r} must be positive, got {value!r}")
+    return v
+
+
+def _amplitudes(value: Any) -> list[float]:
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) == 0:
+        raise ValueError(f"'amplitudes_mm' must be a non-empty list of numbers, got {value!r}")
+    return [_positive("amplitudes_mm", a) for a in value]
+
+
+def check_excitation(kind: str, params: dict[str, Any]) -> None:
+    """Raise ``ValueError`` naming what is wrong with an excitation spec."""
+    if kind not in _REQUIRED:
+        raise ValueError(f"unknown excitation kind {kind!r}; expected one of {EXCITATION_KINDS}")
+    missing = [k for k in _REQUIRED[kind] if k not in params]
+    if missing:
+        raise ValueError(f"excitation {kind!r} is missing parameter(s) {missing}")
+    extra = sorted(set(params) - set(_REQUIRED[kind]) - set(_OPTIONAL.get(kind, ())))
+    if extra:
+        raise ValueError(f"excitation {kind!r} does not take parameter(s) {extra}")
+
+
+def _sample(t_end: float, dt: float) -> FloatArray:
+    n = int(round(t_end / dt)) + 1
+    return np.arange(n, dtype=float) * dt
+
+
+def _decay_periods(amps: list[float], n_per: int, period_of: Any, shape: Any, dt: float
+                   ) -> tuple[FloatArray, FloatArray]:
+    """Concatenate ``n_per`` periods of ``shape(phase_time, amplitude, period)`` per amplitude."""
+    starts: list[float] = []
+    durations: list[float] = []
+    t0 = 0.0
+    for a in amps:
+        per = period_of(a)
+        for _ in range(n_per):
+            starts.append(t0)
+            durations.append(per)
+            t0 += per
+    t = _sample(t0, dt)
+    y = np.zeros_like(t)
+    idx = 0
+    for a in amps:
+        for _ in range(n_per):
+            s, d = starts[idx], durations[idx]
+            mask = (t >= s - 1e-12) & (t < s + d - 1e-12)
+            y[mask] = shape(t[mask] - s, a, d)
+            idx += 1
+    return t, y
+
+
+def _triangle(tau: FloatArray, a: float, per: float) -> FloatArray:
+    # 0 -> +a -> -a -> 0 over one period (starts upwards from rest, like the sine).
+    x = tau / per
+    return a * np.where(x < 0.25, 4 * x, np.where(x < 0.75, 2 - 4 * x, 4 * x - 4))
+
+
+def make_excitation(kind: str, *, dt_s: float = 0.01, **params: Any
+                    ) -> tuple[FloatArray, FloatArray]:
+    """Commanded trajectory ``(t_s, command)`` of an excitation kind (format section 1).
+
+    Decaying kinds start at rest, go up first, and run ``periods_per_amplitude`` periods at
+    each amplitude. Units are the input channel's (mm of pull, or deg of motor angle).
+    """
+    check_excitation(kind, params)
+    dt = _positive("dt_s", dt_s)
+    if kind in ("sine_decay", "sine_decay_offset"):
+        amps = _amplitudes(params["amplitudes_mm"])
+        n_per = int(params["periods_per_amplitude"])
+        f = _positive("frequency_hz", params["frequency_hz"])
+        if n_per < 1:
+            raise ValueError("'periods_per_amplitude' must be >= 1")
+        t, y = _decay_periods(amps, n_per, lambda a: 1.0 / f,
+                              lambda tau, a, per: a * np.sin(2 * np.pi * tau / per), dt)
+        if kind == "sine_decay_offset":
+            y = y + float(params["offset"])
+        return t, y
+    if kind in ("triangle_decay", "trapezoid_decay"):
+        amps = _amplitudes(params["amplitudes_mm"])
+        n_per = int(params["periods_per_amplitude"])
+        v = _positive("slope_mm_s", params["slope_mm_s"])
+        if n_per < 1:
+            raise ValueError("'periods_per_amplitude' must be >= 1")
+        if kind == "triangle_decay":
+            return _decay_periods(amps, n_per, lambda a: 4 * a / v, _triangle, dt)
+        dwell = float(params["dwell_s"])
+        if dwell < 0:
+            raise ValueError("'dwell_s' must be >= 0")
+
+        def trapezoid(tau: FloatArray, a: float, per: float) -> FloatArray:
+            ramp = a / v
+            knots_t = np.cumsum([0, ramp, dwell, 2 * ramp, dwell, ramp])
+            knots_y = [0, a, a, -a, -a, 0]
+            return np.interp(tau, knots_t, knots_y)
+
+        return _decay_periods(amps, n_per, lambda a: 4 * a / v + 2 * dwell, trapezoid, dt)
+    if kind == "ramp":
+        v = float(params["velocity_mm_s"])
+        stroke = float(params["stroke_mm"])
+        if v == 0 or not np.isfinite(v):
+            raise ValueError("'velocity_mm_s' must be non-zero")
+        dwell = float(params.get("dwell_s", 1.0))
+        t_ramp = abs(stroke / v)
+        t = _sample(dwell + t_ramp + dwell, dt)
+        y = np.clip((t - dwell) * abs(v), 0.0, abs(stroke)) * np.sign(stroke)
+        return t, y
+    if kind == "sine":
+        a = float(params["amplitude"])
+        off = float(params["offset"])
+        f = _positive("frequency_hz", params["frequency_hz"])
+        dur = _positive("duration_s", params.get("duration_s", 5.0 / f))
+        t = _sample(dur, dt)
+        # Eases in from rest at the offset: the rig starts where the sine starts.
+        return t, off + a * np.sin(2 * np.pi * f * t)
+    if kind == "mixed_sine":
+        terms = params["terms"]
+        if not isinstance(terms, Sequence) or len(terms) == 0:
+            raise ValueError("'terms' must be a non-empty list of {amplitude, frequency_hz, "
+                             "phase_rad}")
+        fmin = min(_positive("frequency_hz", tm["frequency_hz"]) for tm in terms)
+        dur = _positive("duration_s", params.get("duration_s", 2.0 / fmin))
+        t = _sample(dur, dt)
+        y = np.zeros_like(t)
+        for tm in terms:
+            y += float(tm["amplitude"]) * (np.sin(2 * np.pi * float(tm["frequency_hz"]) * t
+                                                  + float(tm.get("phase_rad", 0.0)))
+                                           - np.sin(float(tm.get("phase_rad", 0.0))))
+        return t, y
+    # free: given samples, resampled to the control rate
+    t_in = np.asarray(params["t_s"], dtype=float)
+    c_in = np.asarray(params["command"], dtype=float)
+    if t_in.ndim != 1 or t_in.shape != c_in.shape or t_in.size < 2:
+        raise ValueError("free excitation: 't_s' and 'command' must be 1-D arrays of equal "
+                         "length >= 2")
+    if np.any(np.diff(t_in) <= 0) or not np.all(np.isfinite(c_in)):
+        raise ValueError("free excitation: 't_s' must increase and 'command' be finite")
+    t = _sample(t_in[-1] - t_in[0], dt)
+    return t, np.interp(t + t_in[0], t_in, c_in)
+
+
+def manifest_excitation(kind: str, params: dict[str, Any]) -> dict[str, Any]:
+    """The manifest's ``excitation`` block (``free`` samples are not written)."""
+    if kind == "free":
+        return {"kind": "free"}
+    out: dict[str, Any] = {"kind": kind}
+    for key, value in params.items():
+        if isinstance(value, np.ndarray):
+            value = value.tolist()
+        elif isinstance(value, tuple):
+            value = list(value)
+        out[key] = value
+    return out
