@@ -83,7 +83,7 @@ def run() -> dict[str, Any]:
     for name in ("linear", "gamma", "preisach"):
         m = models[name]
         m.predict(long_u[:10])
-        sim[name] = long_u.size / _best_of(lambda m=m: m.predict(long_u), 3)
+        sim[name] = long_u.size / _best_of(lambda: m.predict(long_u), 3)  # noqa: B023
     out["forward_samples_per_s"] = sim
     out["preisach_hysterons"] = int(models["preisach"].alpha_.size)
 
@@ -97,7 +97,7 @@ def run() -> dict[str, Any]:
         gm.invert(yd[:5])
         gm.invert_step(float(yd[0]))
         n_ref = 400
-        t_exact_seq = _best_of(lambda gm=gm, yd=yd: gm.invert(yd), 5) / yd.size
+        t_exact_seq = _best_of(lambda: gm.invert(yd), 5) / yd.size  # noqa: B023
 
         def stepwise(gm: GammaModel = gm, yd: np.ndarray = yd, method: str = "exact",
                      n: int = n_ref) -> np.ndarray:
