@@ -70,8 +70,15 @@ def read_processed(path: Path) -> pd.DataFrame:
 
 
 def dataset_hash(path: Path) -> str:
-    """Content hash of the processed dataset (file contents, not times)."""
-    return cache.hash_path(path) if path.exists() else "missing"
+    """Content hash of the processed dataset's parquet files (contents, not times).
+
+    The ingest report and run index beside them carry timings, so they are left out.
+    """
+    if not path.exists():
+        return "missing"
+    if path.is_file():
+        return cache.hash_files([path])
+    return cache.hash_files(sorted(path.rglob("*.parquet")))
 
 
 def hydra_output_dir() -> Path | None:

@@ -132,7 +132,8 @@ def save_models(fits: pd.DataFrame, models_dir: Path) -> list[Path]:
         record = {
             "format": MODEL_FILE_FORMAT,
             **{k: _plain(v) for k, v in row.items() if k not in ("model_json", "cached")},
-            "model": json.loads(row["model_json"]) if row.get("model_json") else None,
+            "model": json.loads(row["model_json"]) if isinstance(row.get("model_json"), str)
+            else None,
         }
         path = model_path(models_dir, row)
         write_text_atomic(path, json.dumps(record, indent=1, allow_nan=True))

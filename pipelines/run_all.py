@@ -56,6 +56,7 @@ class PipelineResult:
     report: Any = None
     parent_run_id: str | None = None
     up_to_date: bool = False
+    ingest_report: dict[str, Any] | None = None
 
 
 def compose_stage(name: str, overrides: Sequence[str] = ()) -> dict[str, Any]:
@@ -71,9 +72,26 @@ def compose_stage(name: str, overrides: Sequence[str] = ()) -> dict[str, Any]:
     return to_container(cfg)
 
 
+def path_overrides(pipeline: Mapping[str, Any]) -> list[str]:
+    """The pipeline's (resolved, absolute) ``paths`` as overrides for a stage's own config."""
+    paths = Paths.from_config(pipeline["paths"])
+    out = []
+    for key in Paths.__dataclass_fields__:
+        value = str(getattr(paths, key))
+        if "'" in value:
+            raise PipelineError(f"paths.{key} may not contain a quote: {value!r}")
+        out.append(f"paths.{key}='{value}'")
+    return out
+
+
+def stage_overrides(name: str, pipeline: Mapping[str, Any]) -> list[str]:
+    return [*path_overrides(pipeline),
+            *list((pipeline.get("overrides") or {}).get(name) or [])]
+
+
 def stage_config(name: str, pipeline: Mapping[str, Any]) -> dict[str, Any]:
     """``conf/<name>.yaml`` + ``overrides.<name>`` + the pipeline's shared values."""
-    cfg = compose_stage(name, list((pipeline.get("overrides") or {}).get(name) or []))
+    cfg = compose_stage(name, stage_overrides(name, pipeline))
     cfg["paths"] = dict(pipeline["paths"])
     cfg["tracking"] = dict(pipeline.get("tracking") or {})
     shared = ("config", "fit_excitations", "signals", "n_jobs", "cache")
@@ -97,7 +115,7 @@ def stage_config(name: str, pipeline: Mapping[str, Any]) -> dict[str, Any]:
 def run_external(stage: str, overrides: Sequence[str], *, root: Path) -> None:
     """Run ``python -m pipelines.<stage>`` in ``root`` (relative data paths land there)."""
     cmd = [sys.executable, "-m", f"pipelines.{stage}", *overrides,
-           f"hydra.run.dir={root / 'outputs' / 'run_all' / stage}"]
+           f"hydra.run.dir='{root / 'outputs' / 'run_all' / stage}'"]
     env = {**os.environ, "HYDRA_FULL_ERROR": "1",
            "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO_ROOT),
                                                        os.environ.get("PYTHONPATH")]))}
@@ -106,6 +124,27 @@ def run_external(stage: str, overrides: Sequence[str], *, root: Path) -> None:
     if proc.returncode != 0:
         raise PipelineError(f"stage {stage!r} failed with exit code {proc.returncode} "
                             f"(command: {' '.join(cmd)})")
+
+
+def run_ingest_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
+    """Ingest in this process through ``pipelines.ingest.run_ingest`` (as its CLI does).
+
+    Rejected runs are reported and left out; the pipeline goes on with the accepted ones
+    (``python -m pipelines.ingest`` alone exits 1 instead).
+    """
+    from pipelines.ingest import run_ingest
+    from rig_io.synchronise import SyncOptions
+
+    icfg = compose_stage("ingest", stage_overrides("ingest", pipeline))
+    report: dict[str, Any] = run_ingest(
+        str(icfg["source"]), str(icfg["out"]), mapping=icfg.get("importer"),
+        sync=SyncOptions(**dict(icfg.get("sync") or {})), force=bool(icfg.get("force", False)),
+        prune=bool(icfg.get("prune", True)), progress=bool(icfg.get("progress", True)))
+    for rej in report.get("rejected", []):
+        log.warning("ingest rejected %s: %s", rej.get("source"), rej.get("reason"))
+    if not report.get("n_accepted"):
+        raise PipelineError(f"ingest accepted no run from {icfg['source']}")
+    return report
 
 
 def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
@@ -129,12 +168,14 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
         tracker.init_store()
         result.timings["tracking_init"] = time.perf_counter() - t0
 
-    overrides = cfg.get("overrides") or {}
-    for stage in EXTERNAL_STAGES:
-        if stage in wanted:
-            t0 = time.perf_counter()
-            run_external(stage, list(overrides.get(stage) or []), root=paths.root)
-            result.timings[stage] = time.perf_counter() - t0
+    if "generate" in wanted:
+        t0 = time.perf_counter()
+        run_external("generate", stage_overrides("generate", cfg), root=paths.root)
+        result.timings["generate"] = time.perf_counter() - t0
+    if "ingest" in wanted:
+        t0 = time.perf_counter()
+        result.ingest_report = run_ingest_stage(cfg)
+        result.timings["ingest"] = time.perf_counter() - t0
 
     dataset = None
     if any(s in wanted for s in ("fit", "validate")):
@@ -185,6 +226,8 @@ def _track(tracker: Any, cfg: Mapping[str, Any], paths: Paths,
         "tracking": tracking.git_commit(),
     })
     tags = {"dataset_hash": data_hash, "pipeline_key": key}
+    if result.ingest_report is not None:
+        tags["ingest_rejected"] = str(result.ingest_report.get("n_rejected", 0))
     params = tracking.flatten({k: v for k, v in cfg.items() if k != "tracking"})
     previous = tracker.find_runs(
         f"tags.pipeline_key = '{key}' and tags.complete = 'true'")

@@ -370,7 +370,7 @@ def log_model_runs(
             "curve_angle_deg": _tag_num(config.curve_angle_deg),
             "radius_mm": _tag_num(config.radius_mm),
             "fit_excitation": fit["fit_excitation"], "fit_run_ids": fit["fit_run_ids"],
-            "model_key": fit["key"], "status": "failed" if fit.get("error") else "ok",
+            "model_key": fit["key"], "status": "failed" if _present(fit.get("error")) else "ok",
         }
         run_id = tracker.start_run(name, parent_id=parent_id, tags=run_tags)
         import json
@@ -390,17 +390,23 @@ def log_model_runs(
         tracker.log(run_id, params=params, metrics=values)
         if mine is not None and not mine.empty:
             tracker.log_table(run_id, mine.reset_index(drop=True), "metrics.json")
-        if fit.get("model_json"):
+        if _present(fit.get("model_json")):
             tracker.log_text(run_id, str(fit["model_json"]), "model/model.json")
-        if fit.get("error"):
+        if _present(fit.get("error")):
             tracker.log_text(run_id, str(fit["error"]), "error.txt")
         for path in (plots or {}).get(config.label, ()):
             tracker.log_artifact(run_id, Path(path), "plots")
         if hydra_dir is not None and hydra_dir.is_dir():
             tracker.log_artifact(run_id, hydra_dir, ".hydra")
-        tracker.end_run(run_id, status="FAILED" if fit.get("error") else "FINISHED")
+        tracker.end_run(run_id, status="FAILED" if _present(fit.get("error")) else "FINISHED")
         ids.append(run_id)
     return ids
+
+
+def _present(value: Any) -> bool:
+    """Not None/NaN/NA (pandas turns a missing string into NaN)."""
+    return value is not None and not (isinstance(value, float) and value != value) \
+        and value is not pd.NA
 
 
 def _num(value: Any) -> float | None:

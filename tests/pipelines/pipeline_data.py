@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -97,3 +98,15 @@ def write_dataset(frame: pd.DataFrame, root: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     frame.to_parquet(out / "part-0.parquet", index=False)
     return out
+
+
+def stage_cfg(root: Path, **extra: Any) -> dict[str, Any]:
+    """A plain stage config rooted at ``root`` (what Hydra would compose), for tests."""
+    paths = {"root": str(root), "raw": f"{root}/data/raw/virtual",
+             "processed": f"{root}/data/processed/virtual", "interim": f"{root}/data/interim",
+             "models": f"{root}/data/interim/models",
+             "predictions": f"{root}/data/interim/predictions", "reports": f"{root}/data/reports"}
+    return {"paths": paths, "families": ["linear", "gamma"], "family_overrides": {},
+            "config": {"rig": None, "curve_angle_deg": None, "radius_mm": None},
+            "fit_excitations": ["sine_decay"], "signals": {"input": "input", "output": "output"},
+            "n_jobs": 1, "cache": True, "progress": False, **extra}
