@@ -31,5 +31,7 @@ def normalise(input_: FloatArray, output: FloatArray) -> dict[str, FloatArray | 
     u, u0 = remove_offset(input_)
     y, y0 = remove_offset(output)
     amp = max_amplitude(u)
+    if not amp > 0:  # a still input: callers reject the run; avoid 0/0 warnings here
+        amp = float("nan")
     return {"input": u, "output": y, "input_norm": u / amp, "output_norm": y / amp,
             "input_offset": u0, "output_offset": y0, "input_amplitude": amp}

@@ -21,7 +21,6 @@ from typing import Any
 import numba
 import numpy as np
 import numpy.typing as npt
-from filterpy.kalman import KalmanFilter
 from scipy.interpolate import CubicHermiteSpline
 
 from rig_io.calibrate import PhysicalRun
@@ -181,6 +180,8 @@ def kalman_upsample(t_frames_s: FloatArray, values: FloatArray, confidence: Floa
 
 def _kalman_filterpy(values: FloatArray, dts: FloatArray, r: FloatArray, q: float,
                      r0: float) -> tuple[FloatArray, FloatArray]:
+    from filterpy.kalman import KalmanFilter  # imported here: it pulls in scipy.stats (1 s)
+
     kf = KalmanFilter(dim_x=2, dim_z=1)
     kf.x = np.array([[values[0]], [0.0]])
     kf.P = np.diag([r0, q])
