@@ -188,7 +188,7 @@ class Saturation(Effect):
     has_theta = True
 
     def grid(self, ident: RunData) -> list[float]:
-        return [0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95]
+        return [0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95, 0.98, 1.0]
 
     def features(
         self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
@@ -205,8 +205,9 @@ class Saturation(Effect):
 class DeadZone(Effect):
     name = "dead_zone"
     signature = (
-        "actuator-side backlash: after every reversal the output stays put for a fixed input "
-        "travel; residual concentrated just after reversals, same size at every amplitude"
+        "actuator-side backlash (lost motion): after every reversal the output waits for a "
+        "fixed input travel; residual is a direction-dependent step of the same size at every "
+        "amplitude and speed, born at the reversals"
     )
     term = "y = base(play_{d/2}(u)), d = dead-zone width"
     side = "input"
@@ -303,7 +304,7 @@ class ComposedModel:
                 base.fit(u, y - g)
                 yb = base.predict(u)
                 sse = float(np.sum((y - yb - self._features(run, yb) @ coef) ** 2))
-                if prev - sse <= self.tol * max(prev, 1e-300):
+                if np.isfinite(prev) and prev - sse <= self.tol * prev:
                     break
                 prev = sse
             phi = self._features(run, yb)

@@ -26,15 +26,16 @@ PHASES = ("loading", "unloading", "after_reversal", "dwell")
 def noise_floor(residual: FloatArray) -> float:
     """Measurement-noise standard deviation from the high-frequency part of the residual.
 
-    Model error is smooth in time; white measurement noise is not. First differences remove the
-    smooth part and double the noise variance; the median absolute deviation makes the estimate
-    robust to the few large jumps at reversals.
+    Model error is smooth in time; white measurement noise is not. Second differences remove
+    the smooth part (up to a linear trend per three samples) and multiply the noise variance by
+    6; the median absolute deviation keeps the estimate robust to the kinks at reversals.
     """
-    d = np.diff(np.asarray(residual, dtype=np.float64))
-    if d.size == 0:
+    e = np.asarray(residual, dtype=np.float64)
+    if e.size < 3:
         return 0.0
+    d = e[2:] - 2.0 * e[1:-1] + e[:-2]
     mad = float(np.median(np.abs(d - np.median(d))))
-    return 1.4826 * mad / np.sqrt(2.0)
+    return 1.4826 * mad / np.sqrt(6.0)
 
 
 def phases(run: RunData, *, reversal_fraction: float = 0.25) -> FloatArray:
