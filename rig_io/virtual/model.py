@@ -55,9 +55,9 @@ class TSMParams:
     #: State at t=0: "released" (the carriage was homed by moving back, the usual case),
     #: "pulled", or "neutral" (uniform pretension).
     initial_state: str = "released"
-    n_lead_in: int = 18
-    n_arc: int = 24
-    n_lead_out: int = 18
+    n_lead_in: int = 14
+    n_arc: int = 22
+    n_lead_out: int = 14
     #: Friction varies with the sliding distance (strand lay of the 7x19 cable, coil pitch):
     #: relative RMS of the modulation, and the wavelength range of its components (mm).
     friction_texture: float = 0.12

@@ -60,7 +60,7 @@ P_STOP_LO = 16  # follower stop on the release side, mm (-inf = none)
 N_P = 17
 
 _EPS_T = 1e-12  # N: tolerance of the stick/slip comparisons
-_TOL_X = 1e-10  # mm: tolerance of the position solve
+_TOL_X = 1e-8  # mm: tolerance of the position solve (encoder: 1e-4 mm)
 
 
 @njit(cache=True)

@@ -291,8 +291,9 @@ def simulate_run(*, rig: str = "tsm-bench", curve_angle_deg: float, radius_mm: f
     t_cmd, command = make_excitation(kind, dt_s=dt_ctrl, **exc_params)
     n = t_cmd.shape[0]
     # Sample k of the encoder is the state at t_k, before set-point k is applied.
+    first = core.initial_row()
     rec = core.run(core.command_to_mm(command[:-1]))
-    fine = np.vstack([core.initial_row(), rec])
+    fine = np.vstack([first, rec])
     t_fine = np.arange(fine.shape[0]) * core.params.physics_dt_s
     enc_idx = np.arange(n) * core.n_sub
     t_enc = t_cmd

@@ -1,0 +1,192 @@
+"""Stage ``generate`` (``make data``): the virtual rig writes a campaign of raw runs.
+
+    python -m pipelines.generate                        # standard 72-run campaign -> data/raw/virtual
+    python -m pipelines.generate format=mcap out=<dir>  # the same runs as rosbag2 (.mcap)
+    python -m pipelines.generate campaign=quick effects=drift_only out=<dir>
+
+Each run is simulated by :func:`rig_io.virtual.simulate_run` and written by the format's own
+writers (:func:`rig_io.folder.write_run_folder`, :func:`rig_io.bag.write_bag`), atomically.
+Raw runs are never rewritten: a run that already exists with the same spec is skipped, a
+different spec under an existing run id is an error unless ``overwrite=true``. The specs and
+their hashes are recorded in ``<out>/campaign.json``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import time
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from rig_io.atomic import write_text_atomic
+from rig_io.virtual import simulate_run, standard_campaign
+from rig_io.virtual.campaign import STANDARD_EXCITATIONS
+
+FORMATS = ("folder", "rosbag1", "sqlite3", "mcap")
+CAMPAIGN_FILE = "campaign.json"
+
+
+class GenerateError(Exception):
+    """A campaign that cannot be written as asked (bad option, clash with existing runs)."""
+
+
+def campaign_specs(*, seed: int = 0, rig: str = "tsm-bench",
+                   curve_angles_deg: Iterable[float] | None = None,
+                   radii_mm: Iterable[float] | None = None,
+                   excitations: Iterable[Mapping[str, Any]] | None = None,
+                   effects: Mapping[str, float] | None = None,
+                   sensors: Mapping[str, Any] | None = None,
+                   params: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
+    """The run specs of a campaign (``standard_campaign`` with the config's choices)."""
+    kw: dict[str, Any] = {}
+    if curve_angles_deg is not None:
+        kw["curve_angles_deg"] = list(curve_angles_deg)
+    if radii_mm is not None:
+        kw["radii_mm"] = list(radii_mm)
+    kw["excitations"] = ([dict(e) for e in excitations] if excitations is not None
+                         else list(STANDARD_EXCITATIONS))
+    specs = standard_campaign(int(seed), rig=rig,
+                              effects={k: float(v) for k, v in (effects or {}).items()},
+                              sensors=dict(sensors) if sensors else None, **kw)
+    if params:
+        for spec in specs:
+            spec["params"] = dict(params)
+    return specs
+
+
+def spec_hash(spec: Mapping[str, Any]) -> str:
+    """Stable hash of a run spec (what makes the run's bytes)."""
+    text = json.dumps(spec, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
+
+def target_path(out: Path, run_id: str, fmt: str) -> Path:
+    return out / (f"{run_id}.bag" if fmt == "rosbag1" else run_id)
+
+
+def write_one(spec: dict[str, Any], out: str, fmt: str, compress: bool) -> dict[str, Any]:
+    """Simulate and write one run (runs in a worker process)."""
+    t0 = time.perf_counter()
+    run = simulate_run(**spec)
+    t1 = time.perf_counter()
+    target = target_path(Path(out), run.run_id, fmt)
+    if fmt == "folder":
+        from rig_io.folder import write_run_folder
+
+        path = write_run_folder(run, out, compress=compress)
+    else:
+        from rig_io.bag import write_bag
+
+        path = write_bag(run, target, storage=fmt)  # type: ignore[arg-type]
+    t2 = time.perf_counter()
+    return {"run_id": run.run_id, "path": str(path), "simulate_s": t1 - t0, "write_s": t2 - t1}
+
+
+def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "folder",
+                 compress: bool = False, n_jobs: int = 2, overwrite: bool = False,
+                 progress: bool = True) -> dict[str, Any]:
+    """Write every spec's run under ``out``; return a small report (also in campaign.json)."""
+    if fmt not in FORMATS:
+        raise GenerateError(f"format must be one of {FORMATS}, got {fmt!r}")
+    if compress and fmt != "folder":
+        raise GenerateError("compress=true applies to run folders only (format=folder)")
+    ids = [s["run_id"] for s in specs]
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        raise GenerateError(f"run ids repeat in the campaign: {dup[:5]}")
+    out = Path(out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    book_path = out / CAMPAIGN_FILE
+    book: dict[str, Any] = {}
+    if book_path.is_file():
+        try:
+            book = json.loads(book_path.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as err:
+            raise GenerateError(f"{book_path} is unreadable ({err}); remove it or the "
+                                "folder") from None
+    known: dict[str, Any] = dict(book.get("runs", {}))
+    todo: list[dict[str, Any]] = []
+    skipped: list[str] = []
+    for spec in specs:
+        rid, h = spec["run_id"], spec_hash(spec)
+        target = target_path(out, rid, fmt)
+        if target.exists() and not overwrite:
+            old = known.get(rid, {})
+            if old.get("spec_hash") == h and old.get("format") == fmt:
+                skipped.append(rid)
+                continue
+            raise GenerateError(
+                f"run {rid!r} already exists at {target} with a different or unknown spec; "
+                "raw runs are never rewritten: use another out=, remove it (make clean-data), "
+                "or pass overwrite=true")
+        todo.append(spec)
+    t0 = time.perf_counter()
+    results: list[dict[str, Any]] = []
+    bar = tqdm(total=len(todo), desc="generate", unit="run", disable=not progress,
+               file=sys.stderr)
+    if n_jobs > 1 and len(todo) > 1:
+        from joblib import Parallel, delayed
+
+        par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered")
+        for res in par(delayed(write_one)(s, str(out), fmt, compress) for s in todo):
+            results.append(res)
+            bar.update(1)
+    else:
+        for s in todo:
+            results.append(write_one(s, str(out), fmt, compress))
+            bar.update(1)
+    bar.close()
+    elapsed = time.perf_counter() - t0
+    by_id = {s["run_id"]: s for s in specs}
+    for res in results:
+        rid = res["run_id"]
+        known[rid] = {"spec_hash": spec_hash(by_id[rid]), "format": fmt,
+                      "path": Path(res["path"]).name, "spec": by_id[rid]}
+    book = {"generator": "rig_io.virtual", "runs": dict(sorted(known.items()))}
+    write_text_atomic(book_path, json.dumps(book, indent=1, default=str) + "\n")
+    return {"out": str(out), "format": fmt, "written": sorted(r["run_id"] for r in results),
+            "skipped": skipped, "seconds": elapsed,
+            "simulate_s": sum(r["simulate_s"] for r in results),
+            "write_s": sum(r["write_s"] for r in results)}
+
+
+def specs_from_config(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
+    rig = cfg["rig"]
+    camp = cfg["campaign"]
+    return campaign_specs(seed=int(camp.get("seed", 0)), rig=str(rig.get("name", "tsm-bench")),
+                          curve_angles_deg=camp.get("curve_angles_deg"),
+                          radii_mm=camp.get("radii_mm"), excitations=camp.get("excitations"),
+                          effects=cfg.get("effects") or {}, sensors=rig.get("sensors") or {},
+                          params=rig.get("params") or {})
+
+
+def _main() -> None:
+    import hydra
+    from omegaconf import DictConfig, OmegaConf
+
+    @hydra.main(config_path="../conf", config_name="generate", version_base="1.3")
+    def main(cfg: DictConfig) -> None:
+        conf = OmegaConf.to_container(cfg, resolve=True)
+        assert isinstance(conf, dict)
+        try:
+            specs = specs_from_config(conf)  # type: ignore[arg-type]
+            report = run_generate(specs, conf["out"], fmt=str(conf["format"]),
+                                  compress=bool(conf["compress"]), n_jobs=int(conf["n_jobs"]),
+                                  overwrite=bool(conf["overwrite"]),
+                                  progress=bool(conf["progress"]))
+        except (GenerateError, ValueError) as err:
+            print(f"generate: error: {err}", file=sys.stderr)
+            raise SystemExit(2) from None
+        print(f"generate: {len(report['written'])} runs written, {len(report['skipped'])} "
+              f"unchanged, {report['seconds']:.1f} s -> {report['out']} ({report['format']})")
+
+    main()
+
+
+if __name__ == "__main__":
+    _main()
