@@ -105,7 +105,14 @@ def gamma_invert_exact(
     for i in range(n):
         bps[2 * i] = w[i]
         bps[2 * i + 1] = w[i] + p[i]
-    bps.sort()
+    # insertion sort: 2n ~ 22 values, and np.sort costs seconds of numba compile time
+    for i in range(1, 2 * n):
+        x = bps[i]
+        j = i - 1
+        while j >= 0 and bps[j] > x:
+            bps[j + 1] = bps[j]
+            j -= 1
+        bps[j + 1] = x
     sq = 0.0
     for i in range(n):
         sq += q[i]
@@ -224,14 +231,26 @@ def relay_states(
     for least squares are stored.
     """
     n_rows = (u.size + every - 1) // every
-    out = np.empty((n_rows, r0.size))
+    n_c = r0.size
+    out = np.empty((n_rows, n_c))
     r = r0.copy()
+    inv_h = 1.0 / h if h > 0.0 else 0.0
     row = 0
+    countdown = 0
     for k in range(u.size):
-        relay_update(u[k], r, alpha, beta, h)
-        if k % every == 0:
-            out[row, :] = r
+        v = u[k]
+        for c in range(n_c):
+            up, dn = _relay_bounds(v, alpha[c], beta[c], inv_h)
+            rc = max(up, r[c])
+            if rc > dn:
+                rc = dn
+            r[c] = rc
+        if countdown == 0:
+            for c in range(n_c):
+                out[row, c] = r[c]
             row += 1
+            countdown = every
+        countdown -= 1
     return out, r
 
 
