@@ -33,6 +33,7 @@ from typing import Any
 
 import numba
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import minimize
 
 from hysteresis.base import (
@@ -385,6 +386,26 @@ def single_thread_blas() -> AbstractContextManager[Any]:
     return threadpool_limits(limits=1, user_api="blas")
 
 
+def decimation_index(u: FloatArray, max_samples: int) -> npt.NDArray[np.intp]:
+    """Indices of a rate-independent decimation: every k-th sample plus the input's turning
+    points (so the decimated record sees the same reversals), at most about ``max_samples``
+    (turning points are dropped first if a noisy input has too many of them)."""
+    n = u.size
+    stride = max(1, math.ceil(n / max(10, int(max_samples))))
+    idx = np.arange(0, n, stride)
+    if stride == 1:
+        return idx
+    du = np.diff(u)
+    tol = 1e-6 * float(np.ptp(u))
+    nz = np.flatnonzero(np.abs(du) > tol)
+    if nz.size > 1:
+        sgn = np.sign(du[nz])
+        turns = nz[1:][sgn[1:] != sgn[:-1]]  # first sample of each new direction
+        if turns.size <= max_samples // 2:
+            idx = np.union1d(idx, np.concatenate([turns, np.array([n - 1])]))
+    return idx
+
+
 def _normaliser(x: FloatArray, name: str) -> tuple[float, float]:
     lo, hi = float(np.min(x)), float(np.max(x))
     half = 0.5 * (hi - lo)
@@ -451,8 +472,8 @@ class BoucWenModel(HysteresisModel):
             raise HysteresisError(
                 f"unknown Bouc-Wen method {self.method!r}; use 'varpro' or one of {_RAW_METHODS}"
             )
-        stride = max(1, math.ceil(uu.size / max(10, int(self.fit_max_samples))))
-        ud, yd = uu[::stride], yy[::stride]
+        keep = decimation_index(uu, int(self.fit_max_samples))
+        ud, yd = uu[keep], yy[keep]
         if self.method == "varpro":
             with single_thread_blas():
                 params, offset = self._fit_varpro(ud, yd)

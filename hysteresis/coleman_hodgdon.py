@@ -42,7 +42,7 @@ from hysteresis.base import (
     check_pair,
     register_family,
 )
-from hysteresis.bouc_wen import single_thread_blas
+from hysteresis.bouc_wen import decimation_index, single_thread_blas
 
 __all__ = ["ColemanHodgdonModel", "ch_simulate", "PAPER_PARAMS"]
 
@@ -246,8 +246,8 @@ class ColemanHodgdonModel(HysteresisModel):
         if self.b_sign not in ("negative", "free"):
             raise HysteresisError(f"b_sign must be 'negative' or 'free', got {self.b_sign!r}")
         euler = _is_euler(self.scheme)
-        stride = max(1, math.ceil(uu.size / max(10, int(self.fit_max_samples))))
-        ud, yd = uu[::stride], yy[::stride]
+        keep = decimation_index(uu, int(self.fit_max_samples))
+        ud, yd = uu[keep], yy[keep]
         uc, us = _normaliser(ud, "u")
         yc, ys = _normaliser(yd, "y")
         un = (ud - uc) / us
