@@ -150,3 +150,30 @@ def test_hydra_config_instantiates() -> None:
     model = instantiate(cfg)
     assert isinstance(model, ColemanHodgdonModel)
     assert model.get_params() == make_family("coleman_hodgdon").get_params()
+
+
+def test_fits_virtual_rig_sine_and_predicts_its_triangle() -> None:
+    from rig_io.calibrate import calibrate_raw_run
+    from rig_io.virtual import simulate_run
+
+    amps = [6.0, 4.5, 3.0, 1.5]
+    runs = []
+    for seed, e in enumerate([
+        {"kind": "sine_decay", "amplitudes_mm": amps, "periods_per_amplitude": 5,
+         "frequency_hz": 0.25},
+        {"kind": "triangle_decay", "amplitudes_mm": amps, "periods_per_amplitude": 3,
+         "slope_mm_s": 6.0},
+    ], start=1):
+        enc = calibrate_raw_run(simulate_run(curve_angle_deg=90.0, radius_mm=30.0,
+                                             excitation=e, seed=seed)).encoder
+        runs += [enc["input"].to_numpy(), enc["output"].to_numpy()]
+    u, y, ut, yt = runs
+    linear = make_family("linear").fit(u, y)
+    rmse_lin = float(np.sqrt(np.mean((linear.predict(ut) - yt) ** 2)))
+    for kw in ({}, {"b_sign": "free"}):
+        model = ColemanHodgdonModel(**kw).fit(u, y)
+        rmse = float(np.sqrt(np.mean((model.predict(ut) - yt) ** 2)))
+        assert model.score(ut, yt) > 0.99, kw
+        assert rmse < 0.3 * rmse_lin, kw
+    target = model.predict(ut)
+    np.testing.assert_allclose(model.predict(model.invert(target)), target, atol=1e-8)
