@@ -15,9 +15,9 @@ EFFECT_NAMES = ("rate_dependence", "tendon_elongation", "time_delay", "drift", "
                 "saturation", "dead_zone")
 
 #: Nominal sizes (strength 1).
-RATE_GAIN = 0.5  # friction grows by up to +50 % with sliding speed ...
-RATE_V0_MM_S = 5.0  # ... over this speed scale (tanh)
-ELONGATION_PER_N2 = 2.0e-6  # extra strain per N^2 of tension (constructional stretch)
+RATE_GAIN = 1.0  # friction grows by up to +100 % with sliding speed ...
+RATE_V0_MM_S = 10.0  # ... over this speed scale (tanh)
+ELONGATION_PER_N2 = 5.0e-6  # extra strain per N^2 of tension (constructional stretch)
 TIME_DELAY_S = 0.05  # latency of the output measurement
 DRIFT_MM = 0.3  # creep/thermal offset of the output ...
 DRIFT_TAU_S = 60.0  # ... approached with this time constant
