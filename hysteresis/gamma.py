@@ -164,9 +164,12 @@ class GammaModel(HysteresisModel):
 
     # -- simulation -------------------------------------------------------------------
     def initial_state(self, u0: float = 0.0) -> GammaState:
-        """The identification state: every operator at zero (seed 001 ``W_{k-1}(1) = 0``)."""
+        """The identification state, every operator at zero (seed 001 ``W_{k-1}(1) = 0``),
+        after the input ``u0`` is applied once (for ``u0 = 0`` the zero state itself)."""
         self.check_fitted()
-        return GammaState(np.zeros(self.thresholds_.size), float(u0))
+        v = float(u0)
+        w = np.minimum(v, np.maximum(v - self.thresholds_, 0.0))
+        return GammaState(w, v)
 
     def _state(self, state: Any) -> GammaState:
         if state is None:

@@ -355,10 +355,14 @@ class PreisachModel(HysteresisModel):
         step = float(self.levels_[1] - self.levels_[0])
         return float(self.levels_[0] - step), float(self.levels_[-1] + step)
 
+    def _default_u0(self) -> float:
+        lo, hi = self._input_bounds()
+        return 0.0 if lo < 0.0 < hi else 0.5 * (lo + hi)
+
     def invert_step(self, y_k: float, state: Any = None) -> tuple[float, PreisachState]:
         """One step of the per-step inverse search: ``(u_k, state_k)``."""
         self.check_fitted()
-        st = self._state(state, 0.0)
+        st = self._state(state, self._default_u0())
         lo, hi = self._input_bounds()
         v = float(relay_invert_step(
             float(y_k), st.r, self.alpha_, self.beta_, float(self.ramp_width_),
@@ -380,9 +384,7 @@ class PreisachModel(HysteresisModel):
         self.check_fitted()
         yd = as_1d(y_desired, "y_desired")
         lo, hi = self._input_bounds()
-        if u0 is None:
-            u0 = 0.0 if lo < 0.0 < hi else 0.5 * (lo + hi)
-        st = self._state(state, float(u0))
+        st = self._state(state, self._default_u0() if u0 is None else float(u0))
         u, r, v = relay_invert_sequence(
             yd, self.alpha_, self.beta_, float(self.ramp_width_), self.cell_weights_,
             self.offset_, self.reversible_gain_, st.r, st.u, lo, hi, float(self.inverse_xtol),
