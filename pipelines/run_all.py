@@ -4,10 +4,10 @@
     python -m pipelines.run_all +experiment=quick
     python -m pipelines.run_all paths.root=/tmp/cold-run          # everything in another folder
 
-``generate`` and ``ingest`` run as their own Hydra entry points (a subprocess each, in
-``paths.root``); ``fit``, ``validate`` and ``report`` are called in this process through their
-Hydra-free ``run`` functions, each with its own composed stage config (``conf/fit.yaml`` ...)
-plus the shared values of ``conf/pipeline.yaml``. Every stage skips what its content hashes
+Every stage runs in this process through its Hydra-free function (``run_generate``,
+``run_ingest``, and the ``run`` of fit/validate/report), each with its own composed stage
+config (``conf/generate.yaml``, ``conf/ingest.yaml``, ``conf/fit.yaml`` ...) plus
+``overrides.<stage>`` and the shared values of ``conf/pipeline.yaml`` (paths first). Every stage skips what its content hashes
 say is unchanged. MLflow: one parent run per invocation and a child run per (family,
 configuration); when nothing changed at all, the parent run only points at the run that
 already holds the identical results (``same_as`` tag) instead of logging 120 copies.
@@ -57,6 +57,7 @@ class PipelineResult:
     parent_run_id: str | None = None
     up_to_date: bool = False
     ingest_report: dict[str, Any] | None = None
+    generate_report: dict[str, Any] | None = None
 
 
 def compose_stage(name: str, overrides: Sequence[str] = ()) -> dict[str, Any]:
@@ -126,6 +127,21 @@ def run_external(stage: str, overrides: Sequence[str], *, root: Path) -> None:
                             f"(command: {' '.join(cmd)})")
 
 
+def run_generate_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
+    """The virtual-rig campaign in this process through ``pipelines.generate`` (as its CLI)."""
+    from pipelines.generate import run_generate, specs_from_config
+
+    gcfg = compose_stage("generate", stage_overrides("generate", pipeline))
+    report: dict[str, Any] = run_generate(
+        specs_from_config(gcfg), str(gcfg["out"]), fmt=str(gcfg.get("format", "folder")),
+        compress=bool(gcfg.get("compress", False)), n_jobs=int(gcfg.get("n_jobs", 2)),
+        overwrite=bool(gcfg.get("overwrite", False)),
+        progress=bool(gcfg.get("progress", True)))
+    log.info("generate: %d runs written, %d unchanged -> %s", len(report["written"]),
+             len(report["skipped"]), report["out"])
+    return report
+
+
 def run_ingest_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
     """Ingest in this process through ``pipelines.ingest.run_ingest`` (as its CLI does).
 
@@ -170,7 +186,7 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
 
     if "generate" in wanted:
         t0 = time.perf_counter()
-        run_external("generate", stage_overrides("generate", cfg), root=paths.root)
+        result.generate_report = run_generate_stage(cfg)
         result.timings["generate"] = time.perf_counter() - t0
     if "ingest" in wanted:
         t0 = time.perf_counter()

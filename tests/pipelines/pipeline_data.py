@@ -110,3 +110,28 @@ def stage_cfg(root: Path, **extra: Any) -> dict[str, Any]:
             "config": {"rig": None, "curve_angle_deg": None, "radius_mm": None},
             "fit_excitations": ["sine_decay"], "signals": {"input": "input", "output": "output"},
             "n_jobs": 1, "cache": True, "progress": False, **extra}
+
+
+def mlflow_store(root: Path) -> Path:
+    """An initialised (empty) MLflow SQLite store at ``<root>/mlflow.db``.
+
+    Creating the schema runs every MLflow migration (seconds); tests copy a template made
+    once per machine and MLflow version instead.
+    """
+    import os
+    import shutil
+    import tempfile
+
+    import mlflow
+    from mlflow import MlflowClient
+
+    template = Path(tempfile.gettempdir()) / f"tsm-mlflow-template-{mlflow.__version__}.db"
+    if not template.exists():
+        fd, tmp_name = tempfile.mkstemp(suffix=".db", dir=template.parent)
+        os.close(fd)
+        os.unlink(tmp_name)
+        MlflowClient(f"sqlite:///{tmp_name}").search_experiments()  # creates the schema
+        os.replace(tmp_name, template)
+    root.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(template, root / "mlflow.db")
+    return root / "mlflow.db"
