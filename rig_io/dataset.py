@@ -42,7 +42,19 @@ def write_run_rows(out: str | os.PathLike[str], frame: pd.DataFrame,
     """Validate (write edge) and write one run's rows atomically, metadata embedded."""
     run_id = str(meta["run_id"])
     frame = validate(frame, where="write", run=run_id)
-    table = pa.Table.from_pandas(frame, schema=ARROW_SCHEMA, preserve_index=False)
+    # Column by column from numpy (pandas' converter spins up a thread pool per call).
+    arrays = []
+    for field in ARROW_SCHEMA:
+        col = frame[field.name]
+        if pa.types.is_string(field.type):
+            values = col.unique()
+            if len(values) == 1:
+                arrays.append(pa.repeat(pa.scalar(str(values[0]), pa.string()), len(col)))
+                continue
+            arrays.append(pa.array(col.astype(str).tolist(), type=pa.string()))
+        else:
+            arrays.append(pa.array(col.to_numpy(dtype=float), type=field.type))
+    table = pa.Table.from_arrays(arrays, schema=ARROW_SCHEMA)
     table = table.replace_schema_metadata({META_KEY: json.dumps(meta, default=str).encode()})
     target = run_file(out, run_id)
     with atomic_path(target, suffix=".parquet") as tmp:

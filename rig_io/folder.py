@@ -182,7 +182,7 @@ def read_stream_csv(path: str | os.PathLike[str], name: str, *, run: str) -> pd.
     except UnicodeDecodeError as err:
         line = data[: err.start].count(b"\n") + 1
         raise RigIOError("not valid UTF-8", run=run, file=file, row=line) from None
-    if not text.strip():
+    if not text or text.isspace():
         raise RigIOError("empty file", run=run, file=file)
     header_end = text.find("\n")
     header = (text if header_end < 0 else text[:header_end]).rstrip("\r").split(",")
@@ -192,7 +192,7 @@ def read_stream_csv(path: str | os.PathLike[str], name: str, *, run: str) -> pd.
         raise RigIOError(f"missing required column(s) {', '.join(missing)} "
                          f"(header is {','.join(header)})", run=run, file=file, row=1)
     body = text[header_end + 1:] if header_end >= 0 else ""
-    if not body.strip():
+    if not body or body.isspace():
         raise RigIOError("no data rows after the header", run=run, file=file)
     # A logger killed mid-write leaves a last line without its terminator or short of fields.
     last_start = body.rstrip("\n").rfind("\n") + 1

@@ -116,17 +116,29 @@ def estimate_latency(t_frames_s: FloatArray, values: FloatArray, t_ref_s: FloatA
     """
     ok = np.isfinite(ref)
     t_ref_s, ref = t_ref_s[ok], ref[ok]
-    lags = np.arange(0.0, max_latency_s + step_s / 2, step_s)
-    corr = np.full(lags.size, np.nan)
     v = values - values.mean()
-    for i, lag in enumerate(lags):
-        r = np.interp(t_frames_s - lag, t_ref_s, ref, left=np.nan, right=np.nan)
-        m = np.isfinite(r)
-        if m.sum() < 10:
-            continue
-        a, b = v[m] - v[m].mean(), r[m] - r[m].mean()
-        den = np.sqrt(np.dot(a, a) * np.dot(b, b))
-        corr[i] = abs(np.dot(a, b) / den) if den > 0 else np.nan
+
+    def score(lags: FloatArray) -> FloatArray:
+        corr = np.full(lags.size, np.nan)
+        for i, lag in enumerate(lags):
+            r = np.interp(t_frames_s - lag, t_ref_s, ref, left=np.nan, right=np.nan)
+            m = np.isfinite(r)
+            if m.sum() < 10:
+                continue
+            a, b = v[m] - v[m].mean(), r[m] - r[m].mean()
+            den = np.sqrt(np.dot(a, a) * np.dot(b, b))
+            corr[i] = abs(np.dot(a, b) / den) if den > 0 else np.nan
+        return corr
+
+    # Coarse pass every 10 steps, then every step around the best coarse lag.
+    coarse = np.arange(0.0, max_latency_s + step_s / 2, 10 * step_s)
+    c_corr = score(coarse)
+    if not np.isfinite(c_corr).any():
+        return float("nan"), float("nan")
+    best = float(coarse[int(np.nanargmax(c_corr))])
+    lags = np.arange(max(0.0, best - 10 * step_s), min(max_latency_s, best + 10 * step_s)
+                     + step_s / 2, step_s)
+    corr = score(lags)
     if not np.isfinite(corr).any():
         return float("nan"), float("nan")
     k = int(np.nanargmax(corr))
