@@ -18,6 +18,7 @@ import hashlib
 import json
 import sys
 import time
+from collections.abc import Mapping
 from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
@@ -40,7 +41,8 @@ def options_hash(sync: SyncOptions, mapping: dict[str, Any] | None) -> str:
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def run_ingest(source: str | Path, out: str | Path, *, mapping: dict[str, Any] | None = None,
+def run_ingest(source: str | Path, out: str | Path, *,
+               mapping: Mapping[str, Any] | None = None,
                sync: SyncOptions | None = None, force: bool = False, prune: bool = True,
                progress: bool = True) -> dict[str, Any]:
     """Ingest every run under ``source`` into ``out``; return the report (also written)."""
@@ -50,9 +52,9 @@ def run_ingest(source: str | Path, out: str | Path, *, mapping: dict[str, Any] |
         raise RigIOError("the output folder must not be inside the source folder "
                          "(raw runs are never written)", file=str(dst))
     sync = sync or SyncOptions()
-    mapping = load_mapping(mapping) if mapping is not None else None
-    opts = options_hash(sync, mapping)
-    sources = discover(src, mapping=mapping)
+    plain = load_mapping(mapping) if mapping is not None else None
+    opts = options_hash(sync, plain)
+    sources = discover(src, mapping=plain)
     old = read_runs(dst)
     by_key = {str(m.get("source_key")): (rid, m) for rid, m in old.items()}
     runs: dict[str, dict[str, Any]] = {}
@@ -78,7 +80,7 @@ def run_ingest(source: str | Path, out: str | Path, *, mapping: dict[str, Any] |
                              "n_samples": cached[1].get("n_samples")})
             continue
         try:
-            phys = load(s, mapping=mapping)
+            phys = load(s, mapping=plain)
             if phys.run_id in runs:
                 raise RigIOError(f"duplicate run_id: already ingested from "
                                  f"{runs[phys.run_id]['source_key']!r}", run=phys.run_id,

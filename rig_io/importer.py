@@ -30,6 +30,7 @@ from __future__ import annotations
 import copy
 import fnmatch
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -48,10 +49,10 @@ _REQUIRED = ("name", "pattern", "rig", "time", "input", "output")
 IMPORTER_VERSION = "1"
 
 
-def load_mapping(path_or_mapping: str | os.PathLike[str] | dict[str, Any]) -> dict[str, Any]:
-    """A mapping from a YAML file (or an already loaded dict, e.g. a Hydra config), checked."""
-    if isinstance(path_or_mapping, dict):
-        mapping = copy.deepcopy(path_or_mapping)
+def load_mapping(path_or_mapping: str | os.PathLike[str] | Mapping[str, Any]) -> dict[str, Any]:
+    """A mapping from a YAML file (or an already loaded mapping, e.g. a Hydra config), checked."""
+    if isinstance(path_or_mapping, Mapping):
+        mapping = _plain(path_or_mapping)
         where = str(mapping.get("name", "<mapping>"))
     else:
         where = str(path_or_mapping)
@@ -72,6 +73,15 @@ def load_mapping(path_or_mapping: str | os.PathLike[str] | dict[str, Any]) -> di
         raise RigIOError(f"unknown time unit {unit!r} (known: {', '.join(_TIME_TO_NS)})",
                          file=where)
     return mapping
+
+
+def _plain(value: Any) -> Any:
+    """Deep copy into plain dicts and lists (OmegaConf containers included)."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple) or type(value).__name__ == "ListConfig":
+        return [_plain(v) for v in value]
+    return copy.deepcopy(value)
 
 
 def matches(mapping: dict[str, Any], path: str | os.PathLike[str]) -> bool:
