@@ -155,7 +155,20 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
             "write_s": sum(r["write_s"] for r in results)}
 
 
+def _plain(node: Any) -> Any:
+    """OmegaConf nodes as plain containers (the manifest must be plain JSON)."""
+    try:
+        from omegaconf import DictConfig, ListConfig, OmegaConf
+    except ImportError:  # pragma: no cover
+        return node
+    if isinstance(node, DictConfig | ListConfig):
+        return OmegaConf.to_container(node, resolve=True)
+    return node
+
+
 def specs_from_config(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Run specs of a composed ``generate`` config (``rig``, ``campaign``, ``effects``)."""
+    cfg = _plain(cfg)
     rig = cfg["rig"]
     camp = cfg["campaign"]
     return campaign_specs(seed=int(camp.get("seed", 0)), rig=str(rig.get("name", "tsm-bench")),
