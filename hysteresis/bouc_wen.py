@@ -64,7 +64,8 @@ def _rate(h: float, d: float, a_: float, b_: float, c_: float, n: float) -> floa
     if ah == 0.0:
         return a_
     sg = 1.0 if h > 0.0 else -1.0
-    return a_ - (b_ * d * sg + c_) * ah**n
+    an: float = ah**n
+    return a_ - (b_ * d * sg + c_) * an
 
 
 @numba.njit(cache=True)
@@ -72,8 +73,9 @@ def _lip_ultimate(a_: float, b_: float, c_: float, n: float) -> float:
     """Lipschitz constant of dh/du at the ultimate |h| = (A/(B+C))^(1/n) (0 if unbounded)."""
     g = b_ + c_
     if g > 0.0 and a_ > 0.0 and n > 0.0:
-        hu = (a_ / g) ** (1.0 / n)
-        return abs(n) * (abs(b_) + abs(c_)) * hu ** (n - 1.0)
+        hu: float = (a_ / g) ** (1.0 / n)
+        hun: float = hu ** (n - 1.0)
+        return abs(n) * (abs(b_) + abs(c_)) * hun
     return 0.0
 
 
@@ -116,7 +118,7 @@ def _simulate(
     a_: float, b_: float, c_: float, n: float, alpha: float, beta: float, offset: float,
     h0: float, u0: float, max_sub: int, out: FloatArray,
 ) -> float:
-    """Fill ``out`` with eq. 2 along u from state (h0, u0); returns the final h (NaN if blown up)."""
+    """Fill ``out`` with eq. 2 along u from state (h0, u0); return the final h (NaN: blown up)."""
     h = h0
     up = u0
     lip_u = _lip_ultimate(a_, b_, c_, n)
@@ -272,9 +274,9 @@ def _invert_exact(
         x = min(step * 0.5, scale)
         for _ in range(80):
             hx = _advance(h, d * x, a_, b_, c_, n, max_sub, lip_u)
-            gx = alpha * (up + d * x) + beta * hx + offset - target if not math.isnan(hx) else math.nan
-            if math.isnan(gx):
+            if math.isnan(hx):
                 break
+            gx = alpha * (up + d * x) + beta * hx + offset - target
             if abs(gx) < best_g:
                 best_g = abs(gx)
                 best_x = x
@@ -350,7 +352,8 @@ def bw_simulate(
     if p.shape != (6,):
         raise HysteresisError(f"params must be [A, B, C, n, alpha, beta], got shape {p.shape}")
     out = np.empty_like(uu)
-    _simulate(uu, *map(float, p), float(offset), float(h0),
+    a_, b_, c_, n, alpha, beta = (float(v) for v in p)
+    _simulate(uu, a_, b_, c_, n, alpha, beta, float(offset), float(h0),
               float(uu[0] if u0 is None else u0), int(max_substeps), out)
     return out
 
@@ -360,7 +363,8 @@ def paper_mse(u: FloatArray, y: FloatArray, params: Any, *, max_substeps: int = 
     p = np.asarray(params, dtype=np.float64)
     if not np.all(np.isfinite(p)):
         return PAPER_PENALTY
-    return float(_mse_paper(u, y, *map(float, p), int(max_substeps)))
+    a_, b_, c_, n, alpha, beta = (float(v) for v in p)
+    return float(_mse_paper(u, y, a_, b_, c_, n, alpha, beta, int(max_substeps)))
 
 
 def canonical_params(params: Any) -> FloatArray:
@@ -383,7 +387,8 @@ def single_thread_blas() -> AbstractContextManager[Any]:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - threadpoolctl ships with the lock file
         return nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    limiter: AbstractContextManager[Any] = threadpool_limits(limits=1, user_api="blas")
+    return limiter
 
 
 def decimation_index(u: FloatArray, max_samples: int) -> npt.NDArray[np.intp]:
@@ -491,7 +496,8 @@ class BoucWenModel(HysteresisModel):
         self.A_, self.B_, self.C_, self.n_ = a_, b_, c_, n
         self.alpha_, self.beta_, self.offset_ = alpha, beta, float(offset)
         pred = self.predict(uu)
-        self.train_mse_ = float(np.mean((yy - pred) ** 2)) if np.all(np.isfinite(pred)) else math.inf
+        finite = bool(np.all(np.isfinite(pred)))
+        self.train_mse_ = float(np.mean((yy - pred) ** 2)) if finite else math.inf
         return self
 
     def _fit_varpro(self, u: FloatArray, y: FloatArray) -> tuple[FloatArray, float]:

@@ -260,7 +260,9 @@ class ColemanHodgdonModel(HysteresisModel):
             with single_thread_blas():
                 z = self._fit_varpro(un, yn, euler, b_hi)
         else:
-            raise HysteresisError(f"unknown Coleman-Hodgdon method {self.method!r}; use 'ga' or 'varpro'")
+            raise HysteresisError(
+                f"unknown Coleman-Hodgdon method {self.method!r}; use 'ga' or 'varpro'"
+            )
         a_n, b_n, c_n, k_n = 10.0 ** z[0], z[1], z[2], z[3]
         # Back to the original units (see module docstring for the algebra).
         self.A_ = float(a_n / us)

@@ -284,3 +284,20 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(f"{m:<12} {s['success']:>4}/{n:<3} {s['mse_mean']:>10.3g} "
                      f"{s['mse_sd']:>10.3g} {s['time_median_s']:>11.4f}")
     return "\n".join(lines)
+
+
+def _main() -> None:  # pragma: no cover - manual use: the paper's full budgets, all 18 cases
+    import argparse
+    import json
+
+    ap = argparse.ArgumentParser(description="Bouc-Wen optimiser comparison (seed 002 IV-A)")
+    ap.add_argument("--init", choices=("paper", "box"), default="paper")
+    ap.add_argument("--cases", type=int, default=18)
+    ap.add_argument("--json", action="store_true", help="print the full result as JSON")
+    args = ap.parse_args()
+    res = compare_optimisers(paper_cases(args.cases, init=args.init))
+    print(json.dumps(res, indent=1) if args.json else format_table(res))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    _main()

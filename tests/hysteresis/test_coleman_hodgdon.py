@@ -72,7 +72,8 @@ def test_refit_of_own_simulation_returns_paper_parameters() -> None:
 
 def test_recovery_with_noise_and_other_parameters() -> None:
     rng = np.random.default_rng(7)
-    u = np.concatenate([_paper_triangle(2), _paper_triangle(2, 0.0, 3.0), _paper_triangle(2, 3.0, 6.0)])
+    u = np.concatenate([_paper_triangle(2), _paper_triangle(2, 0.0, 3.0),
+                        _paper_triangle(2, 3.0, 6.0)])
     true = (2.0, -0.5, 10.0)
     y = ch_simulate(u, *true, origin=(3.0, 30.0)) + rng.normal(0.0, 0.3, u.size)
     model = ColemanHodgdonModel().fit(u, y)
