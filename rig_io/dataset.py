@@ -55,7 +55,10 @@ def write_run_rows(out: str | os.PathLike[str], frame: pd.DataFrame,
         else:
             arrays.append(pa.array(col.to_numpy(dtype=float), type=field.type))
     table = pa.Table.from_arrays(arrays, schema=ARROW_SCHEMA)
-    table = table.replace_schema_metadata({META_KEY: json.dumps(meta, default=str).encode()})
+    # No wall-clock fields in the file: the same rows give the same bytes (stages hash them).
+    embedded = {k: v for k, v in meta.items() if k != "ingested_at"}
+    table = table.replace_schema_metadata(
+        {META_KEY: json.dumps(embedded, default=str, sort_keys=True).encode()})
     target = run_file(out, run_id)
     with atomic_path(target, suffix=".parquet") as tmp:
         pq.write_table(table, tmp, compression="zstd")
