@@ -11,15 +11,18 @@ Densities (``density=``), with ``a = alpha - centre``, ``b = beta - centre``:
 
 * ``"lorentzian"`` (eq. 4.4): ``N / ([1 + ((a - H0)/(s H0))^2] [1 + ((b + H0)/(s H0))^2])``;
 * ``"gauss_gauss"`` (eq. 4.5):
-  ``N exp(-((a-b)/2 - H0)^2 / (2 s^2 H0^2)) exp(-((a+b)/2)^2 / (2 s^2 H0^2))``;
+  ``N exp(-((a-b)/2 - H0)^2 / (2 s^2 H0^2)) exp(-kappa ((a+b)/2)^2 / (2 s^2 H0^2))``;
 * ``"lognormal_gauss"`` (eq. 4.6):
-  ``N (2/(a-b)) exp(-ln((a-b)/(2 H0))^2 / (2 s^2)) exp(-(a+b)^2 / (8 s^2 H0^2))``
+  ``N (2/(a-b)) exp(-ln((a-b)/(2 H0))^2 / (2 s^2)) exp(-kappa (a+b)^2 / (8 s^2 H0^2))``
   (the printed eq. 4.6 lost the square on the logarithm; the lognormal needs it);
 * ``"nonparametric"``: one non-negative weight per cell, by non-negative least squares.
 
-Parametric densities (``N, H0, s, centre`` and the offset) are identified by nonlinear least
-squares (``scipy.optimize.least_squares``, analytic-in-``N`` Jacobian through the fixed relay
-state matrix) from the best start of a small grid over ``(H0, s)``. The relay states depend only
+``kappa = 1`` is the paper's density; with ``free_spread`` it is fitted in ``[0, 100]``
+(``kappa = 0``: uniform along ``alpha + beta``, the plane of a play-operator model).
+``reversible`` adds ``gain * u``. Parametric densities are identified by nonlinear least squares
+(``scipy.optimize.least_squares``) over the shape ``(H0, s, centre[, kappa])`` with the linear
+part (``N >= 0``, offset, ``gain >= 0``) projected out exactly at every evaluation, from the
+best start of a small grid. The relay states depend only
 on the input, so they are computed once per fit (numba); ``fit_every`` keeps every n-th row of
 them for the least squares (the plane itself is advanced on every sample).
 
@@ -70,28 +73,28 @@ class PreisachState:
 
 def density_shape(
     kind: str, alpha: FloatArray, beta: FloatArray, h0: float, sigma: float, centre: float,
-    *, min_width: float, spread: float = 1.0,
+    *, min_width: float, kappa: float = 1.0,
 ) -> FloatArray:
     """Unscaled density ``mu / N`` at the cells; ``alpha - beta`` floored at ``min_width``.
 
-    ``spread`` multiplies the width ``s H0`` of the factor along ``alpha + beta`` (the
-    interaction axis) only; ``spread = 1`` is the paper's density.
+    ``kappa`` scales the precision (inverse variance) of the Gaussian factor along
+    ``alpha + beta`` (the interaction axis) only: ``kappa = 1`` is the paper's density,
+    ``kappa = 0`` a density uniform along that axis (a Prandtl-Ishlinskii-like plane).
+    The factorised Lorentzian has no such factor and ignores it.
     """
     a = alpha - centre
     b = beta - centre
     s = sigma * h0
-    sc = s * spread
     if kind == "lorentzian":
-        # factorised: spread widens both factors' tails away from (H0, -H0) symmetrically
-        return 1.0 / ((1.0 + ((a - h0) / sc) ** 2) * (1.0 + ((b + h0) / sc) ** 2))
+        return 1.0 / ((1.0 + ((a - h0) / s) ** 2) * (1.0 + ((b + h0) / s) ** 2))
     if kind == "gauss_gauss":
         return np.exp(-(((a - b) / 2.0 - h0) ** 2) / (2.0 * s * s)) * np.exp(
-            -(((a + b) / 2.0) ** 2) / (2.0 * sc * sc)
+            -kappa * ((a + b) / 2.0) ** 2 / (2.0 * s * s)
         )
     if kind == "lognormal_gauss":
         width = np.maximum(a - b, min_width)
         return (2.0 / width) * np.exp(-(np.log(width / (2.0 * h0)) ** 2) / (2.0 * sigma**2)) * (
-            np.exp(-((a + b) ** 2) / (8.0 * sc * sc))
+            np.exp(-kappa * (a + b) ** 2 / (8.0 * s * s))
         )
     raise HysteresisError(f"density must be one of {DENSITIES}, got {kind!r}")
 
@@ -117,7 +120,7 @@ class PreisachModel(HysteresisModel):
     inverse_xtol:
         Input tolerance of the per-step inverse search, in input units.
     free_spread:
-        Fit the width of the density along ``alpha + beta`` separately (``spread``); with
+        Fit the precision of the density along ``alpha + beta`` separately (``kappa``); with
         ``False`` the density is exactly the paper's (one width ``sigma H0`` for both axes).
     reversible:
         Add a reversible linear term ``gain * u`` (``gain >= 0``) to the relay sum.
@@ -174,11 +177,11 @@ class PreisachModel(HysteresisModel):
         self.ramp_width_ = step if self.smooth else 0.0
 
     def _shape(self, theta: FloatArray) -> FloatArray:
-        """Cell weights per unit ``N`` for ``theta = (N, H0, sigma, centre, spread)``."""
+        """Cell weights per unit ``N`` for ``theta = (N, H0, sigma, centre, kappa)``."""
         step = float(self.levels_[1] - self.levels_[0])
         return density_shape(
             self.density, self.alpha_, self.beta_, float(theta[1]), float(theta[2]),
-            float(theta[3]), min_width=step / 3.0, spread=float(theta[4]),
+            float(theta[3]), min_width=step / 3.0, kappa=float(theta[4]),
         ) * self.cell_area_
 
     def initial_state(self, u0: float = 0.0) -> PreisachState:
@@ -237,7 +240,7 @@ class PreisachModel(HysteresisModel):
         self.density_params_ = np.zeros(0)
 
     def _fit_parametric(self, rows: FloatArray, target: FloatArray, u: FloatArray) -> None:
-        # x = (N, H0, sigma, centre, spread, offset, gain); N, offset, gain enter linearly.
+        # x = (N, H0, sigma, centre, kappa, offset, gain); N, offset, gain enter linearly.
         half = 0.5 * float(u.max() - u.min())
         centre0 = 0.5 * float(u.max() + u.min())
         k = rows.shape[1]
@@ -250,33 +253,41 @@ class PreisachModel(HysteresisModel):
         raug = scipy_qr(aug, mode="r", overwrite_a=True, check_finite=False)[0]
         rmat, qt = raug[: k + 2, : k + 2], raug[: k + 2, k + 2]
         r_cells, r_off, r_gain = rmat[:, :k], rmat[:, k], rmat[:, k + 1]
-        lin_cols = [r_off, r_gain] if self.reversible else [r_off]
         spread_free = self.free_spread and self.density != "lorentzian"
-        # Start: coarse grid over (H0, sigma[, spread]) with the linear part solved exactly.
+        rev = bool(self.reversible)
+
+        def linear_part(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+            """Variable projection: best (N >= 0, offset, gain >= 0) for the shape in ``x``."""
+            cols = [r_cells @ self._shape(x), r_off, -r_off]  # offset of either sign
+            if rev:
+                cols.append(r_gain)
+            a = np.column_stack(cols)
+            c, _ = nnls(a, qt)
+            coef = np.array([c[0], c[1] - c[2], c[3] if rev else 0.0])
+            res_: FloatArray = a @ c - qt
+            return coef, res_
+
+        # Start: coarse grid over (H0, sigma[, kappa]).
         best: tuple[float, FloatArray] | None = None
-        spreads = (1.0, 4.0, 16.0) if spread_free else (1.0,)
+        kappas = (1.0, 1.0 / 16.0, 1.0 / 256.0, 0.0) if spread_free else (1.0,)
         for h0 in half * np.array([0.03, 0.08, 0.15, 0.3, 0.5]):
             for sigma in (0.3, 0.6, 1.2):
-                for spread in spreads:
-                    theta = np.array([1.0, h0, sigma, centre0, spread])
-                    a = np.column_stack([r_cells @ self._shape(theta), *lin_cols])
-                    coef, *_ = np.linalg.lstsq(a, qt, rcond=None)
+                for kappa in kappas:
+                    theta = np.array([1.0, h0, sigma, centre0, kappa])
+                    coef, res_ = linear_part(theta)
                     if coef[0] <= 0:
                         continue
-                    sse = float(np.sum((a @ coef - qt) ** 2))
+                    sse = float(res_ @ res_)
                     if best is None or sse < best[0]:
-                        gain = max(float(coef[2]), 0.0) if self.reversible else 0.0
-                        best = (sse, np.array([coef[0], h0, sigma, centre0, spread, coef[1], gain]))
+                        best = (sse, theta)
         if best is None:
             raise HysteresisError(
                 "no positive density fits the data (is the output decreasing in the input?)"
             )
-        free = [0, 1, 2, 3, 5]
-        if spread_free:
-            free.append(4)
-        if self.reversible:
-            free.append(6)
-        free.sort()
+        # Nonlinear least squares over the shape only (H0, sigma, centre[, kappa]); the
+        # linear part is projected out at every evaluation (far fewer iterations than
+        # optimising N and the offset jointly with the shape).
+        free = [1, 2, 3, 4] if spread_free else [1, 2, 3]
         full0 = best[1]
 
         def unpack(z: FloatArray) -> FloatArray:
@@ -285,46 +296,27 @@ class PreisachModel(HysteresisModel):
             return x
 
         def resid(z: FloatArray) -> FloatArray:
-            x = unpack(z)
-            out: FloatArray = r_cells @ (x[0] * self._shape(x)) + x[5] * r_off + x[6] * r_gain
-            res_: FloatArray = out - qt
-            return res_
-
-        def jac(z: FloatArray) -> FloatArray:
-            x = unpack(z)
-            shp = self._shape(x)
-            dw = np.zeros((k, len(free)))
-            extra = np.zeros((qt.size, len(free)))
-            for col, j in enumerate(free):
-                if j == 0:
-                    dw[:, col] = shp
-                elif j == 5:
-                    extra[:, col] = r_off
-                elif j == 6:
-                    extra[:, col] = r_gain
-                else:  # central differences of the cheap K-vector, not of the residual
-                    dx = 1e-6 * max(abs(float(x[j])), 1e-3)
-                    xp, xm = x.copy(), x.copy()
-                    xp[j] += dx
-                    xm[j] -= dx
-                    dw[:, col] = x[0] * (self._shape(xp) - self._shape(xm)) / (2 * dx)
-            out: FloatArray = r_cells @ dw + extra
-            return out
+            return linear_part(unpack(z))[1]
 
         span = 2.0 * half
-        lo_all = np.array([0.0, 1e-3 * half, 0.02, centre0 - span, 0.1, -np.inf, 0.0])
-        hi_all = np.array([np.inf, 2.0 * span, 20.0, centre0 + span, 100.0, np.inf, np.inf])
+        lo_all = np.array([0.0, 1e-3 * half, 0.02, centre0 - span, 0.0])
+        hi_all = np.array([np.inf, 2.0 * span, 20.0, centre0 + span, 100.0])
         lo, hi = lo_all[free], hi_all[free]
-        z0 = np.clip(full0[free], lo + 1e-12, hi - 1e-12)
+        z0 = np.clip(full0[free], lo + 1e-9, hi - 1e-9)
         res = least_squares(
-            resid, z0, jac=jac, bounds=(lo, hi), x_scale="jac", max_nfev=int(self.max_nfev),
-            method="trf",
+            resid, z0, jac="2-point", bounds=(lo, hi), x_scale="jac",
+            max_nfev=int(self.max_nfev), method="trf",
         )
         x = unpack(res.x)
+        coef, _ = linear_part(x)
+        x[0] = coef[0]
+        if spread_free and x[4] == 0.0:
+            x[3] = centre0  # uniform along alpha + beta: the centre has no effect; report the mid
+
         self.density_params_ = np.ascontiguousarray(x[:5])
         self.cell_weights_ = np.ascontiguousarray(x[0] * self._shape(x))
-        self.offset_ = float(x[5])
-        self.reversible_gain_ = float(x[6])
+        self.offset_ = float(coef[1])
+        self.reversible_gain_ = float(coef[2])
         self.n_fev_ = int(res.nfev)
 
     # -- simulation -------------------------------------------------------------------
