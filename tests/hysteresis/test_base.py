@@ -134,3 +134,19 @@ def test_families_fit_virtual_rig_sine_and_predict_its_triangle() -> None:
     # and the Gamma inverse compensates the model's own hysteresis on the triangle target
     gm = make_family("gamma").fit(u, y)
     np.testing.assert_allclose(gm.predict(gm.invert(yt)), yt, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["linear", "gamma", "preisach"])
+def test_hydra_family_config_instantiates_the_default_model(name: str) -> None:
+    """conf/family/<name>.yaml names every hyper-parameter with the class default."""
+    from pathlib import Path
+
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+
+    path = Path(__file__).resolve().parents[2] / "conf" / "family" / f"{name}.yaml"
+    cfg = OmegaConf.load(path)
+    model = instantiate(cfg, _convert_="all")
+    assert type(model) is family_class(name)
+    assert model.get_params() == family_class(name)().get_params()
+    assert set(cfg.keys()) - {"_target_"} == set(model.get_params())
