@@ -32,7 +32,7 @@ from typing import Any
 
 import numba
 import numpy as np
-from scipy.optimize import differential_evolution, lsq_linear, minimize_scalar
+from scipy.optimize import differential_evolution, lsq_linear, minimize, minimize_scalar
 
 from hysteresis.base import (
     FloatArray,
@@ -222,9 +222,9 @@ class ColemanHodgdonModel(HysteresisModel):
         method: str = "ga",
         b_sign: str = "negative",
         scheme: str = "exact",
-        fit_max_samples: int = 2000,
+        fit_max_samples: int = 1000,
         popsize: int = 15,
-        maxiter: int = 200,
+        maxiter: int = 100,
         seed: int = 0,
         polish: bool = True,
     ) -> None:
@@ -287,10 +287,19 @@ class ColemanHodgdonModel(HysteresisModel):
         bounds = [(-1.5, 2.5), (-20.0, b_hi), (1e-6, 20.0), (-5.0, 5.0)]
         res = differential_evolution(
             batch, bounds, seed=int(self.seed), popsize=int(self.popsize),
-            maxiter=int(self.maxiter), tol=1e-10, atol=0.0, polish=bool(self.polish),
+            maxiter=int(self.maxiter), tol=1e-10, atol=0.0, polish=False,
             vectorized=True, updating="deferred", init="sobol",
         )
-        return np.asarray(res.x, dtype=np.float64)
+        x = np.asarray(res.x, dtype=np.float64)
+        if self.polish:
+            # scipy's own polish stops at its default relative ftol, which on an MSE near
+            # zero leaves the 4th digit wrong; polish with tight tolerances instead.
+            pol = minimize(lambda z: float(batch(z.reshape(4, 1))[0]), x, method="L-BFGS-B",
+                           bounds=bounds, options={"ftol": 1e-15, "gtol": 1e-12,
+                                                   "maxiter": 500})
+            if float(pol.fun) <= float(res.fun):
+                x = np.asarray(pol.x, dtype=np.float64)
+        return x
 
     def _fit_varpro(self, un: FloatArray, yn: FloatArray, euler: bool, b_hi: float) -> FloatArray:
         basis = np.empty((un.size, 3))
