@@ -71,9 +71,9 @@ def target_path(out: Path, run_id: str, fmt: str) -> Path:
 
 def write_one(spec: dict[str, Any], out: str, fmt: str, compress: bool) -> dict[str, Any]:
     """Simulate and write one run (runs in a worker process)."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     run = simulate_run(**spec)
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), time.process_time()
     target = target_path(Path(out), run.run_id, fmt)
     if fmt == "folder":
         from rig_io.folder import write_run_folder
@@ -83,8 +83,9 @@ def write_one(spec: dict[str, Any], out: str, fmt: str, compress: bool) -> dict[
         from rig_io.bag import write_bag
 
         path = write_bag(run, target, storage=fmt)  # type: ignore[arg-type]
-    t2 = time.perf_counter()
-    return {"run_id": run.run_id, "path": str(path), "simulate_s": t1 - t0, "write_s": t2 - t1}
+    t2, c2 = time.perf_counter(), time.process_time()
+    return {"run_id": run.run_id, "path": str(path), "simulate_s": t1 - t0, "write_s": t2 - t1,
+            "simulate_cpu_s": c1 - c0, "write_cpu_s": c2 - c1}
 
 
 def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "folder",
@@ -152,7 +153,8 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
     return {"out": str(out), "format": fmt, "written": sorted(r["run_id"] for r in results),
             "skipped": skipped, "seconds": elapsed,
             "simulate_s": sum(r["simulate_s"] for r in results),
-            "write_s": sum(r["write_s"] for r in results)}
+            "write_s": sum(r["write_s"] for r in results),
+            "cpu_s": sum(r["simulate_cpu_s"] + r["write_cpu_s"] for r in results)}
 
 
 def _plain(node: Any) -> Any:
