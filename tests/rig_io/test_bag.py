@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
@@ -135,3 +136,64 @@ def test_bag_value_checks(tmp_path: Path) -> None:
     path = write_bag(run, tmp_path / "e.bag", storage="rosbag1")
     with pytest.raises(RigIOError, match=r"est_0001.*e.bag.*t=990000000 ns.*emergency stop"):
         read_bag(path)
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_bulk_decoding_equals_message_by_message(tmp_path: Path, storage: str,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    import rig_io.bag as bag
+
+    run = make_raw_run("bulk_0001", duration_s=2.0, with_tracker=True)
+    path = write_bag(run, tmp_path / _name(storage), storage=storage)  # type: ignore[arg-type]
+    calls = []
+    real = bag._layout
+
+    def spy(*args, **kwargs):  # type: ignore[no-untyped-def]
+        out = real(*args, **kwargs)
+        calls.append(out is not None)
+        return out
+
+    monkeypatch.setattr(bag, "_layout", spy)
+    fast = read_bag(path)
+    assert calls and all(calls)  # joints, both load cells, camera, tracker took the bulk path
+    monkeypatch.setattr(bag, "_layout", lambda *a, **k: None)
+    slow = read_bag(path)
+    for stream in ("encoder", "loadcell", "camera", "tracker", "events"):
+        pd.testing.assert_frame_equal(getattr(fast, stream), getattr(slow, stream),
+                                      check_exact=True, obj=stream)
+
+
+def test_joint_names_that_vary_fall_back_to_per_message(tmp_path: Path) -> None:
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    msgs = []
+    for i, names in enumerate([["input", "output"], ["input", "outpux"], ["input", "output"]]):
+        stamp = T["builtin_interfaces/msg/Time"](sec=i, nanosec=0)
+        header = T["std_msgs/msg/Header"](stamp=stamp, frame_id="rig")
+        msg = T["sensor_msgs/msg/JointState"](header=header, name=names,
+                                              position=np.array([0.001 * i, 0.002 * i]),
+                                              velocity=np.zeros(0), effort=np.zeros(0))
+        msgs.append((i * 1_000_000_000, msg, "sensor_msgs/msg/JointState"))
+    path = _ros2_bag(tmp_path / "vary", {"/rig/manifest": [_manifest_msg("vary_0001")],
+                                         "/rig/joints": msgs})
+    back = read_bag(path, check=False)
+    np.testing.assert_allclose(back.encoder["input"], [0.0, 1.0, 2.0])
+    assert np.isnan(back.encoder["output"].iloc[1]) and back.encoder["output"].iloc[2] == 4.0
+
+
+@pytest.mark.parametrize("storage", ["rosbag1", "sqlite3"])
+def test_bulk_serialisation_equals_message_by_message(tmp_path: Path, storage: str,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    import rig_io.bag as bag
+
+    run = make_raw_run("ser_0001", duration_s=2.0, with_tracker=True, counts_start=2**31 - 99)
+    ros1 = storage == "rosbag1"
+    fast = [(t, topic, data) for topic, _, t, data in bag._messages(calibrate_raw_run(run), ros1)]
+    first = {topic: data for _, topic, data in reversed(fast)}
+    assert bag._layout(bag.MSG_WRENCH, first["/rig/load/input"], cdr=not ros1) is not None
+    for topic in ("/rig/joints", "/rig/camera/value", "/rig/tracker/value"):
+        assert bag._layout(bag.MSG_JOINTS, first[topic], cdr=not ros1) is not None
+    monkeypatch.setattr(bag, "_layout", lambda *a, **k: None)
+    slow = [(t, topic, data) for topic, _, t, data in bag._messages(calibrate_raw_run(run), ros1)]
+    assert len(fast) == len(slow) > 1000
+    assert fast == slow  # byte for byte
