@@ -234,3 +234,29 @@ def test_hydra_entry_point_exit_status(tmp_path: Path) -> None:
     assert "1 accepted (1 processed), 1 rejected" in bad.stderr
     assert "rejected bad_1" in bad.stderr and "empty file" in bad.stderr
     assert json.loads((out / "ingest_report.json").read_text())["n_accepted"] == 1
+
+
+def test_bag_with_sidecar_manifest(tmp_path: Path) -> None:
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.typesys import Stores, get_typestore
+
+    run = _run("side_1", duration_s=2.0)
+    full = write_bag(run, tmp_path / "full.bag", storage="rosbag1")
+    src = tmp_path / "raw"
+    src.mkdir()
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    with AnyReader([full]) as r, Writer1(src / "side.bag") as w:
+        conns: dict[str, object] = {}
+        for c, t, raw in r.messages():
+            if c.topic != "/rig/manifest":
+                if c.topic not in conns:
+                    conns[c.topic] = w.add_connection(c.topic, c.msgtype, typestore=ts)
+                w.write(conns[c.topic], t, raw)  # type: ignore[arg-type]
+    report = run_ingest(src, tmp_path / "out", progress=False)
+    assert report["n_rejected"] == 1 and "side.bag.manifest.json" in report["rejected"][0]["reason"]
+    (src / "side.bag.manifest.json").write_text(json.dumps(run.manifest))
+    report = run_ingest(src, tmp_path / "out", progress=False)
+    assert report["n_rejected"] == 0 and report["n_sources"] == 1
+    meta = read_runs(tmp_path / "out")["side_1"]
+    assert sorted(meta["source_files"]) == ["side.bag", "side.bag.manifest.json"]
