@@ -1,6 +1,6 @@
 """Stage ``generate`` (``make data``): the virtual rig writes a campaign of raw runs.
 
-    python -m pipelines.generate                        # standard 72-run campaign -> data/raw/virtual
+    python -m pipelines.generate                        # 72 standard runs -> data/raw/virtual
     python -m pipelines.generate format=mcap out=<dir>  # the same runs as rosbag2 (.mcap)
     python -m pipelines.generate campaign=quick effects=drift_only out=<dir>
 

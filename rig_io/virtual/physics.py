@@ -68,18 +68,10 @@ def _stretch(t: float, coef: FloatArray, i: int, tref: float, tc: float, ts: flo
     """Elongation of segment ``i`` at tension ``t`` relative to the reference tension."""
     if t < 0.0:
         t = 0.0
-    return (coef[i, 0] * (t - tref)
-            + coef[i, 1] * (t / (t + tc) - tref / (tref + tc))
-            + coef[i, 2] * (t * t - tref * tref)
-            + coef[i, 3] * ts * (math.log1p(t / ts) - math.log1p(tref / ts)))
-
-
-@njit(cache=True)
-def _total_stretch(tens: FloatArray, coef: FloatArray, tref: float, tc: float,
-                   ts: float) -> float:
-    s = 0.0
-    for i in range(tens.shape[0]):
-        s += _stretch(tens[i], coef, i, tref, tc, ts)
+    s: float = (coef[i, 0] * (t - tref)
+                + coef[i, 1] * (t / (t + tc) - tref / (tref + tc))
+                + coef[i, 2] * (t * t - tref * tref)
+                + coef[i, 3] * ts * (math.log1p(t / ts) - math.log1p(tref / ts)))
     return s
 
 
@@ -98,7 +90,7 @@ def _front(t0: float, sgn: float, mu: float, tens: FloatArray, sv: FloatArray, o
         t0 = 0.0
     out[0] = t0
     wsv[0] = _stretch(t0, coef, 0, tref, tc, ts)
-    d = wsv[0] - sv[0]
+    d: float = wsv[0] - sv[0]
     j = 1
     while j < m:
         prev = out[j - 1]
@@ -303,13 +295,15 @@ def advance(x_in: float, u_out: float, mu_pull: float, mu_rel: float, tens: Floa
 
 @njit(cache=True)
 def run_ticks(commands: FloatArray, n_sub: int, state: FloatArray, tens: FloatArray,
-              sv: FloatArray, work: FloatArray, wsv: FloatArray, theta: FloatArray, cont: FloatArray, coef: FloatArray,
-              p: FloatArray, texture: FloatArray, rec: FloatArray) -> None:
+              sv: FloatArray, work: FloatArray, wsv: FloatArray, theta: FloatArray,
+              cont: FloatArray, coef: FloatArray, p: FloatArray, texture: FloatArray,
+              rec: FloatArray) -> None:
     """Advance the rig through ``len(commands)`` control ticks of ``n_sub`` physics ticks.
 
     ``state`` = [carriage position, carriage velocity, tendon-end position, follower position,
-    follower sliding direction] (mm, mm/s, -1/0/+1). ``rec`` has shape ``(len(commands) * n_sub, 4)`` and receives, after every physics
-    tick: carriage position, follower position, input tension, output tension.
+    follower sliding direction] (mm, mm/s, -1/0/+1). ``rec`` has shape
+    ``(len(commands) * n_sub, 4)`` and receives, after every physics tick: carriage position,
+    follower position, input tension, output tension.
     The command of a tick is the servo set-point held during it (the 10 ms loop).
     ``texture`` rows ``(amplitude, wavenumber rad/mm, phase)`` modulate the friction with the
     sliding distance (strand lay and coil pitch): ``mu (1 + sum a sin(k x + psi))``.

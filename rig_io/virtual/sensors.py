@@ -105,7 +105,7 @@ def loadcell_raw(force_n: FloatArray, zero: float, cfg: SensorConfig, rng: np.ra
     raw = zero + force_n / npm + rng.normal(0.0, cfg.loadcell_noise_mv_per_v, force_n.shape)
     hi = zero + cfg.loadcell_range_n / npm
     lo = zero - cfg.loadcell_range_n / npm
-    return np.round(np.clip(raw, lo, hi), 6)
+    return np.asarray(np.round(np.clip(raw, lo, hi), 6), dtype=np.float64)
 
 
 def vision_frames(t_end_s: float, value_at: Any, *, rate_hz: float, latency_s: float,
