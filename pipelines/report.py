@@ -205,7 +205,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
     fit_exc = str(cfg.get("fit_excitation", "sine_decay"))
     metric = str(cfg.get("metric", "rmse"))
     plot_cfg = dict(cfg.get("plots") or {})
-    dpi, max_points = int(plot_cfg.get("dpi", 72)), int(plot_cfg.get("max_points", 3000))
+    dpi, max_points = int(plot_cfg.get("dpi", 72)), int(plot_cfg.get("max_points", 1500))
     configs = sorted({_config_of(r) for r in metrics.to_dict("records")},
                      key=lambda c: (c.rig, c.curve_angle_deg or -1, c.radius_mm or -1))
     if fits is None:

@@ -350,57 +350,87 @@ def log_model_runs(
 ) -> list[str]:
     """One child run per fitted model (family x configuration x identification excitation).
 
-    ``plots`` maps a configuration label to the figure files to attach to each of its runs.
+    Each run: tags (family, rig, configuration, curve_angle_deg, radius_mm, fit_excitation,
+    model key, dataset hash, git commit), params (the flattened stage config plus
+    ``family.*`` hyper-parameters), metrics (:func:`child_metrics`), and artifacts: the model
+    JSON, its metrics table (``metrics.json``, the file and tag ``mlflow.log_table`` writes),
+    the figures of its configuration (``plots`` maps a configuration label to files) and the
+    ``.hydra`` folder. The artifacts are staged locally and uploaded in one call, so a run
+    costs three store writes (create, log_batch, terminate) instead of one per file.
     """
+    import json
+    import tempfile
+
+    from mlflow.utils.mlflow_tags import MLFLOW_LOGGED_ARTIFACTS
+
     from pipelines.stages import Configuration
 
+    by_model: dict[tuple[Any, ...], pd.DataFrame] = {}
+    if metrics is not None and not metrics.empty:
+        keys = ["family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation"]
+        for key, group in metrics.groupby(keys, dropna=False, observed=True, sort=False):
+            by_model[_model_key(*key)] = group.reset_index(drop=True)
     ids: list[str] = []
     records: Iterable[dict[str, Any]] = fits.to_dict("records")
     if progress:
         from tqdm import tqdm
 
         records = tqdm(records, total=len(fits), desc="mlflow", unit="run")
-    for fit in records:
-        config = Configuration(str(fit["rig"]), _num(fit["curve_angle_deg"]),
-                               _num(fit["radius_mm"]))
-        name = f"{fit['family']}/{config.label}/{fit['fit_excitation']}"
-        run_tags = {
-            **tags, "stage": stage, "kind": "model", "family": fit["family"],
-            "rig": config.rig, "configuration": config.label,
-            "curve_angle_deg": _tag_num(config.curve_angle_deg),
-            "radius_mm": _tag_num(config.radius_mm),
-            "fit_excitation": fit["fit_excitation"], "fit_run_ids": fit["fit_run_ids"],
-            "model_key": fit["key"], "status": "failed" if _present(fit.get("error")) else "ok",
-        }
-        run_id = tracker.start_run(name, parent_id=parent_id, tags=run_tags)
-        import json
+    with tempfile.TemporaryDirectory(prefix="tsm-mlflow-") as tmp:
+        for i, fit in enumerate(records):
+            config = Configuration(str(fit["rig"]), _num(fit["curve_angle_deg"]),
+                                   _num(fit["radius_mm"]))
+            failed = _present(fit.get("error"))
+            mine = by_model.get(_model_key(fit["family"], config.rig, config.curve_angle_deg,
+                                           config.radius_mm, fit["fit_excitation"]))
+            staged = Path(tmp) / str(i)
+            staged.mkdir()
+            run_tags: dict[str, Any] = {
+                **tags, "stage": stage, "kind": "model", "family": fit["family"],
+                "rig": config.rig, "configuration": config.label,
+                "curve_angle_deg": _tag_num(config.curve_angle_deg),
+                "radius_mm": _tag_num(config.radius_mm),
+                "fit_excitation": fit["fit_excitation"], "fit_run_ids": fit["fit_run_ids"],
+                "model_key": fit["key"], "status": "failed" if failed else "ok",
+            }
+            if mine is not None:
+                _jsonable(mine).to_json(staged / "metrics.json", orient="split", index=False,
+                                        date_format="iso")
+                run_tags[MLFLOW_LOGGED_ARTIFACTS] = json.dumps(
+                    [{"path": "metrics.json", "type": "table"}])
+            if _present(fit.get("model_json")):
+                (staged / "model").mkdir()
+                (staged / "model" / "model.json").write_text(str(fit["model_json"]))
+            if failed:
+                (staged / "error.txt").write_text(str(fit["error"]))
+            figures = [Path(p) for p in (plots or {}).get(config.label, ()) if Path(p).exists()]
+            if figures:
+                (staged / "plots").mkdir()
+                for fig in figures:  # symlinks: the upload copies the real file once
+                    (staged / "plots" / fig.name).symlink_to(fig.resolve())
+            if hydra_dir is not None and hydra_dir.is_dir():
+                (staged / ".hydra").mkdir()
+                for f in hydra_dir.iterdir():
+                    if f.is_file():
+                        (staged / ".hydra" / f.name).symlink_to(f.resolve())
 
-        family_params = flatten(json.loads(str(fit["params_json"])), "family.")
-        params = {**base_params, **family_params, "family.name": fit["family"]}
-        values: dict[str, float] = {"fit_seconds": float(fit["fit_seconds"]),
-                                    "n_samples": float(fit["n_samples"])}
-        mine = None
-        if metrics is not None and not metrics.empty:
-            mine = metrics[(metrics["family"] == fit["family"])
-                           & (metrics["rig"] == config.rig)
-                           & _eq(metrics["curve_angle_deg"], config.curve_angle_deg)
-                           & _eq(metrics["radius_mm"], config.radius_mm)
-                           & (metrics["fit_excitation"] == fit["fit_excitation"])]
-            values.update(child_metrics(mine))
-        tracker.log(run_id, params=params, metrics=values)
-        if mine is not None and not mine.empty:
-            tracker.log_table(run_id, mine.reset_index(drop=True), "metrics.json")
-        if _present(fit.get("model_json")):
-            tracker.log_text(run_id, str(fit["model_json"]), "model/model.json")
-        if _present(fit.get("error")):
-            tracker.log_text(run_id, str(fit["error"]), "error.txt")
-        for path in (plots or {}).get(config.label, ()):
-            tracker.log_artifact(run_id, Path(path), "plots")
-        if hydra_dir is not None and hydra_dir.is_dir():
-            tracker.log_artifact(run_id, hydra_dir, ".hydra")
-        tracker.end_run(run_id, status="FAILED" if _present(fit.get("error")) else "FINISHED")
-        ids.append(run_id)
+            name = f"{fit['family']}/{config.label}/{fit['fit_excitation']}"
+            run_id = tracker.start_run(name, parent_id=parent_id, tags=run_tags)
+            family_params = flatten(json.loads(str(fit["params_json"])), "family.")
+            params = {**base_params, **family_params, "family.name": fit["family"]}
+            values: dict[str, float] = {"fit_seconds": float(fit["fit_seconds"]),
+                                        "n_samples": float(fit["n_samples"])}
+            if mine is not None:
+                values.update(child_metrics(mine))
+            tracker.log(run_id, params=params, metrics=values)
+            tracker.log_artifact(run_id, staged)
+            tracker.end_run(run_id, status="FAILED" if failed else "FINISHED")
+            ids.append(run_id)
     return ids
+
+
+def _model_key(family: Any, rig: Any, phi: Any, radius: Any, fit_exc: Any) -> tuple[Any, ...]:
+    return (str(family), str(rig), _num(phi), _num(radius), str(fit_exc))
 
 
 def _present(value: Any) -> bool:

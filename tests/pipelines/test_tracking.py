@@ -7,6 +7,7 @@ import json
 import sqlite3
 from pathlib import Path
 
+import mlflow
 import pytest
 from mlflow import MlflowClient
 
@@ -91,10 +92,20 @@ def test_child_runs_carry_params_metrics_tags_and_artifacts(tmp_path: Path) -> N
         model_json = client.download_artifacts(run.info.run_id, "model/model.json",
                                                str(tmp_path / "dl" / run.info.run_id))
         assert json.loads(Path(model_json).read_text())["family"] == tags["family"]
+        assert json.loads(tags["mlflow.loggedArtifacts"]) == [{"path": "metrics.json",
+                                                               "type": "table"}]
         row = metrics[(metrics["family"] == tags["family"])
                       & (metrics["curve_angle_deg"] == float(tags["curve_angle_deg"]))
                       & (metrics["split"] == "fit")].iloc[0]
         assert run.data.metrics["fit.sse"] == pytest.approx(row["sse"])
+    # MLflow's table API reads the per-run tables back (what the UI's table view uses)
+    # (load_table searches through the fluent API, i.e. the global tracking URI)
+    mlflow.set_tracking_uri(tracker.settings.tracking_uri)
+    try:
+        table = client.load_table(tracker.experiment_id, "metrics.json", run_ids=ids)
+    finally:
+        mlflow.set_tracking_uri(None)
+    assert len(table) == len(metrics) and set(table["split"]) == {"fit", "heldout"}
 
 
 def test_stage_run_attaches_to_an_inherited_parent(tmp_path: Path,
