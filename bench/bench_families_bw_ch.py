@@ -57,8 +57,9 @@ def _optimiser_table(init: str, methods: tuple[str, ...]) -> dict[str, Any]:
             "time_median_s": row["time_median_s"],
             # > 1: the paper method is slower than ours / succeeds less often
             "time_ratio_vs_ours": row["time_median_s"] / ours["time_median_s"],
+            # None when the method never succeeds (strict JSON has no infinity)
             "success_ratio_ours_over_method": (
-                ours["success"] / row["success"] if row["success"] else float("inf")),
+                ours["success"] / row["success"] if row["success"] else None),
         }
     return table
 
