@@ -381,7 +381,9 @@ def simulate_run(*, rig: str = "tsm-bench", curve_angle_deg: float, radius_mm: f
 
     rid = run_id if run_id is not None else _run_id(curve_angle_deg, radius_mm, kind, seed)
     if started_at is None:
-        started_at = (_EPOCH + timedelta(minutes=5 * int(seed))).strftime("%Y-%m-%dT%H:%M:%SZ")
+        # A plausible, reproducible start time (seeds can be large: keep within a year).
+        minutes = 5 * (int(seed) % 100_000)
+        started_at = (_EPOCH + timedelta(minutes=minutes)).strftime("%Y-%m-%dT%H:%M:%SZ")
     active = core.effects.active()
     manifest: dict[str, Any] = {
         "format": FORMAT,

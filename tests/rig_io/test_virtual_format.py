@@ -193,3 +193,11 @@ def test_truth_frame_is_on_the_encoder_clock(bench_run) -> None:  # type: ignore
                                    "tension_out_n"]
     np.testing.assert_array_equal(np.rint(truth["t_s"] * 1e9).astype(np.int64),
                                   bench_run.encoder["t_ns"])
+
+
+def test_large_seeds_and_default_run_id() -> None:
+    exc = {"kind": "ramp", "velocity_mm_s": 2.0, "stroke_mm": 1.0, "dwell_s": 0.1}
+    run = simulate_run(curve_angle_deg=45, radius_mm=60, excitation=exc, seed=4_000_000_000)
+    assert run.run_id == "phi045_r060_ramp_4000000000"
+    assert run.manifest["started_at"].startswith("2026-")
+    assert run.manifest["excitation"] == {"kind": "ramp", **{k: v for k, v in exc.items()}}
