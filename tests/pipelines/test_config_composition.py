@@ -84,7 +84,7 @@ def test_experiments_compose_into_the_pipeline() -> None:
 def test_pipeline_forwards_shared_values_to_each_stage(tmp_path: Path) -> None:
     pipeline = to_container(_compose("pipeline", [
         f"paths.root={tmp_path}", "config.curve_angle_deg=45", "n_jobs=1",
-        "heldout=[triangle_decay]", "overrides.fit=[families=[linear]]"]))
+        "heldout=[triangle_decay]", "overrides.fit=['families=[linear]']"]))
     fit_cfg = stage_config("fit", pipeline)
     assert fit_cfg["families"] == ["linear"]
     assert fit_cfg["config"]["curve_angle_deg"] == 45 and fit_cfg["n_jobs"] == 1
