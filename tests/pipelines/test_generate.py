@@ -52,6 +52,8 @@ def test_default_config_is_the_standard_campaign() -> None:
     assert len(other) == 6 and all(s["effects"]["drift"] == 1.0 for s in other)
     assert all(s["rig"] == "bending-joint" for s in other)
     assert [s["seed"] for s in other] != [s["seed"] for s in standard_campaign(0)[:6]]
+    cath = specs_from_config(_compose(["rig=bending_joint_catheter", "campaign=quick"]))
+    assert cath[0]["params"]["section_diameter_mm"] == 6.5
 
 
 def test_writes_valid_run_folders_and_never_rewrites_them(tmp_path: Path) -> None:
