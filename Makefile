@@ -12,6 +12,8 @@ export NUMBA_CACHE_DIR := $(CURDIR)/.venv/numba-cache
 export MPLBACKEND := Agg
 export HYDRA_FULL_ERROR := 1
 
+# Extra Hydra overrides for any stage target: make fit ARGS="family=gamma"
+ARGS ?=
 RUNS ?= data/raw/virtual
 REPORT ?= data/reports/discrepancy.json
 
@@ -39,22 +41,22 @@ $(STAMP): requirements.lock pyproject.toml
 venv: $(STAMP)
 
 data generate: $(STAMP)
-	$(PY) -m pipelines.generate
+	$(PY) -m pipelines.generate $(ARGS)
 
 ingest: $(STAMP)
-	$(PY) -m pipelines.ingest
+	$(PY) -m pipelines.ingest $(ARGS)
 
 fit: $(STAMP)
-	$(PY) -m pipelines.fit
+	$(PY) -m pipelines.fit $(ARGS)
 
 validate: $(STAMP)
-	$(PY) -m pipelines.validate
+	$(PY) -m pipelines.validate $(ARGS)
 
 report: $(STAMP)
-	$(PY) -m pipelines.report
+	$(PY) -m pipelines.report $(ARGS)
 
 pipeline: $(STAMP)
-	$(PY) -m pipelines.run_all
+	$(PY) -m pipelines.run_all $(ARGS)
 
 test: $(STAMP)
 	$(PY) -m pytest -n 2 --dist loadfile
@@ -66,10 +68,10 @@ ui: $(STAMP)
 	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/mlflow.db --host 127.0.0.1 --port 5000
 
 compensate: $(STAMP)
-	$(PY) -m pipelines.compensate
+	$(PY) -m pipelines.compensate $(ARGS)
 
 discrepancy: $(STAMP)
-	$(PY) -m pipelines.discrepancy source=$(RUNS) report=$(REPORT)
+	$(PY) -m pipelines.discrepancy source=$(RUNS) report=$(REPORT) $(ARGS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check hysteresis rig_io pipelines tests bench
