@@ -49,7 +49,7 @@ def run() -> dict[str, Any]:
         cold_wall, cold = _pipeline(root, [])
         warm_wall, warm = _pipeline(root, [])
         metrics = pd.read_parquet(root / "data" / "reports" / "metrics.parquet")
-        fit_s = {}
+        fit_s: dict[str, list[float]] = {}
         models = root / "data" / "interim" / "models"
         for f in models.glob("*/*.json"):
             rec = json.loads(f.read_text())

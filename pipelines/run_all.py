@@ -7,10 +7,11 @@
 Every stage runs in this process through its Hydra-free function (``run_generate``,
 ``run_ingest``, and the ``run`` of fit/validate/report), each with its own composed stage
 config (``conf/generate.yaml``, ``conf/ingest.yaml``, ``conf/fit.yaml`` ...) plus
-``overrides.<stage>`` and the shared values of ``conf/pipeline.yaml`` (paths first). Every stage skips what its content hashes
-say is unchanged. MLflow: one parent run per invocation and a child run per (family,
-configuration); when nothing changed at all, the parent run only points at the run that
-already holds the identical results (``same_as`` tag) instead of logging 120 copies.
+``overrides.<stage>`` and the shared values of ``conf/pipeline.yaml`` (paths first). Every
+stage skips what its content hashes say is unchanged. MLflow: one parent run per invocation
+and a child run per (family, configuration); when nothing changed at all, the parent run
+only points at the run that already holds the identical results (``same_as`` tag) instead
+of logging 120 copies.
 Per-stage wall times go to ``${paths.reports}/pipeline_timing.json`` and the parent run.
 """
 

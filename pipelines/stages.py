@@ -336,7 +336,8 @@ def _progress(items: Sequence[Any], enabled: bool, desc: str) -> Iterable[Any]:
         return items
     from tqdm import tqdm
 
-    return tqdm(items, desc=desc, unit="model")
+    bar: Iterable[Any] = tqdm(items, desc=desc, unit="model")
+    return bar
 
 
 # --------------------------------------------------------------------------------------

@@ -462,13 +462,10 @@ def _eq(column: pd.Series, value: float | None) -> pd.Series:
 # Hydra multirun: one parent per sweep, created before any job starts
 # --------------------------------------------------------------------------------------
 
-try:
-    from hydra.experimental.callback import Callback as _HydraCallback
-except ImportError:  # pragma: no cover - hydra is a dependency
-    _HydraCallback = object  # type: ignore[assignment,misc]
+from hydra.experimental.callback import Callback as _HydraCallback  # noqa: E402
 
 
-class MlflowSweepCallback(_HydraCallback):  # type: ignore[misc,valid-type]
+class MlflowSweepCallback(_HydraCallback):
     """Hydra callback: before a multirun's jobs start, initialise the store and open the
     sweep's parent run; every job (any launcher, any process) then logs under it.
 
