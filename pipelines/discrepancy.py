@@ -62,6 +62,20 @@ def ingest_source(source: str | Path, workdir: Path, *, mapping: Mapping[str, An
     return read_dataset(workdir), read_runs(workdir), rep
 
 
+def rows_from_raw(raw_runs: list[Any]) -> tuple[pd.DataFrame, dict[str, dict[str, Any]]]:
+    """In-memory ingest of :class:`rig_io.run.RawRun` objects (calibrate, synchronise,
+    normalise: the ingest stage's pure functions); returns (rows, per-run metadata)."""
+    from rig_io.calibrate import calibrate_raw_run
+    from rig_io.process import process_run
+
+    frames, meta = [], {}
+    for raw in raw_runs:
+        frame, info = process_run(calibrate_raw_run(raw))
+        frames.append(frame)
+        meta[raw.run_id] = {**info, "manifest": raw.manifest}
+    return pd.concat(frames, ignore_index=True), meta
+
+
 def _role(meta: Mapping[str, Any], kind: str, identify: set[str]) -> str:
     exc = (meta.get("manifest") or {}).get("excitation") or meta.get("excitation") or {}
     role = str(exc.get("role", "")).lower() if isinstance(exc, Mapping) else ""

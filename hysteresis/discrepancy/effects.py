@@ -42,15 +42,19 @@ class Effect:
     signature: str = ""
     term: str = ""
     side: str = "output"  # "input" or "output"
+    #: Output-side features computed from the base's own prediction (not only from the run).
+    uses_base: bool = False
     n_linear: int = 0
     has_theta: bool = False
+    #: Number of nonlinear parameters in ``theta`` (a float, or a tuple when more than one).
+    n_theta: int = 1
 
     def available(self, run: RunData) -> bool:
         return True
 
     @property
     def n_params(self) -> int:
-        return self.n_linear + (1 if self.has_theta else 0)
+        return self.n_linear + (self.n_theta if self.has_theta else 0)
 
     def grid(self, ident: RunData) -> list[float]:
         return [NO_THETA]
@@ -78,21 +82,26 @@ class Effect:
 class RateDependence(Effect):
     name = "rate_dependence"
     signature = (
-        "velocity-dependent friction: loops widen with speed; residual opposes the motion while "
-        "the tendon slides, saturating with speed, larger on faster held-out runs"
+        "velocity-dependent friction: loops widen with sliding speed, saturating above a speed "
+        "scale; residual opposes the motion while the tendon slides, larger on faster runs, "
+        "nearly absent on slow ones"
     )
-    term = "c * tanh(v(t) / v0) (v = smoothed input velocity, v0 on a grid)"
-    n_linear = 1
+    term = ("y = base(u - c tanh(v / v0)): the input as the sheath friction feels it lags by a "
+            "speed-dependent amount (c, v0 on a grid, c refined); the base's own stick/slip keeps "
+            "the term silent while the tendon sticks")
+    side = "input"
     has_theta = True
+    n_theta = 2
 
-    def grid(self, ident: RunData) -> list[float]:
+    def grid(self, ident: RunData) -> list[Any]:
         vmax = float(np.percentile(np.abs(ident.v), 99))
-        return [f * vmax for f in (0.1, 0.2, 0.35, 0.6, 1.0, 2.0)]
+        span = float(np.ptp(ident.u))
+        return [(f * vmax, c * span) for f in (0.25, 0.5, 1.0, 3.0)
+                for c in (0.002, 0.005, 0.01, 0.02, 0.035, 0.05, 0.08)]
 
-    def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
-    ) -> FloatArray:
-        return np.tanh(run.v / theta)[:, None]
+    def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx) -> FloatArray:
+        v0, c = theta
+        return np.asarray(u - c * np.tanh(run.v / v0), dtype=np.float64)
 
 
 class TendonElongation(Effect):
@@ -101,7 +110,8 @@ class TendonElongation(Effect):
         "extra load-dependent compliance: output lag grows with tendon tension (quadratically), "
         "largest at high tension and large amplitude, tensions themselves unchanged"
     )
-    term = "c1 (T_in^2 - T_in(0)^2) + c2 (T_out^2 - T_out(0)^2) (measured tensions)"
+    term = ("c1 (T_in^2 - T_in(0)^2) + c2 (T_out^2 - T_out(0)^2) (measured tensions; quadratic "
+            "compliance integrated along the tendon; c2 only where the output tension is logged)")
     n_linear = 2
 
     def available(self, run: RunData) -> bool:
@@ -114,13 +124,14 @@ class TendonElongation(Effect):
             raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
         scale = max(ctx.get("tension_scale", 1.0), 1e-12)
         cols = [(run.tension**2 - run.tension[0] ** 2) / scale]
-        t_out = run.tension_out if run.tension_out is not None else np.zeros(run.n)
-        cols.append((t_out**2 - t_out[0] ** 2) / scale)
+        if run.tension_out is not None and ctx.get("use_out", 1.0) > 0:
+            # Stretch integrates T^2 along the tendon: both ends' tensions bound the profile.
+            cols.append((run.tension_out**2 - run.tension_out[0] ** 2) / scale)
         return np.column_stack(cols)
 
     def context(self, ident: RunData) -> Ctx:
         t = ident.tension if ident.tension is not None else np.ones(1)
-        return {"tension_scale": float(np.max(t**2))}
+        return {"tension_scale": float(np.max(t**2)), "use_out": 0.0}
 
 
 class TimeDelay(Effect):
@@ -164,16 +175,16 @@ class Drift(Effect):
 class Asymmetry(Effect):
     name = "asymmetry"
     signature = (
-        "direction-dependent friction: the loop is off-centre, mean residual differs between "
-        "loading and unloading by a constant"
+        "direction-dependent friction: more lost motion pulling than releasing (or the reverse); "
+        "the loop centre shifts by a constant from the first motion on, width about the same"
     )
-    term = "c * s(t), s = direction of the last motion (+1 loading, -1 unloading)"
+    term = "c * m(t), m = 0 before the first motion, 1 after (a loop-centre shift born at once)"
     n_linear = 1
 
     def features(
         self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
     ) -> FloatArray:
-        return run.s[:, None]
+        return np.abs(run.s)[:, None]
 
 
 class Saturation(Effect):
@@ -186,6 +197,7 @@ class Saturation(Effect):
             "the identification half-range about its centre (grid); c = 1 is a hard stop")
     n_linear = 2
     has_theta = True
+    uses_base = True
 
     def grid(self, ident: RunData) -> list[float]:
         return [0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95, 0.98, 1.0]
@@ -246,7 +258,7 @@ class Term:
     """An effect with its nonlinear parameter and its identification-run constants."""
 
     effect: Effect
-    theta: float = NO_THETA
+    theta: Any = NO_THETA
     ctx: tuple[tuple[str, float], ...] = ()
 
     @property
@@ -255,8 +267,14 @@ class Term:
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.effect.name,
-                "theta": None if not np.isfinite(self.theta) else float(self.theta),
+                "theta": _theta_json(self.theta),
                 "context": self.context}
+
+
+def _theta_json(theta: Any) -> Any:
+    if isinstance(theta, tuple):
+        return [float(x) for x in theta]
+    return None if not np.isfinite(theta) else float(theta)
 
 
 class ComposedModel:
@@ -290,11 +308,19 @@ class ComposedModel:
     def fit(self, run: RunData) -> ComposedModel:
         u = self._input(run)
         y = run.y
+        out_terms = [t for t in self.terms if t.effect.n_linear > 0]
+        if out_terms and not any(t.effect.uses_base for t in out_terms):
+            joint = _joint_linear(self.base_factory(), u, y, self._features(run, y))
+            if joint is not None:
+                base = self.base_factory()
+                base.fit(u, y - self._features(run, y) @ joint)
+                self.base_, self.coef_ = base, joint
+                return self
         base = self.base_factory()
         base.fit(u, y)
         yb = base.predict(u)
         coef = np.zeros(0)
-        if any(t.effect.n_linear > 0 for t in self.terms):
+        if out_terms:
             prev = np.inf
             for _ in range(self.iterations):
                 phi = self._features(run, yb)
@@ -327,6 +353,34 @@ class ComposedModel:
         return sum(t.effect.n_params for t in self.terms)
 
 
+def _joint_linear(base: HysteresisModel, u: FloatArray, y: FloatArray,
+                  phi: FloatArray) -> FloatArray | None:
+    """Exact joint least squares for a base that is linear in its parameters.
+
+    A base exposing ``design_matrix(u)`` (the Gamma family: play-operator columns, optional
+    offset, optional sum-to-one constraint on the weights) is solved together with the term's
+    features in one (constrained) least-squares problem; returns the features' coefficients,
+    or ``None`` when the base is not of that kind (backfitting is used instead).
+    """
+    design = getattr(base, "design_matrix", None)
+    if design is None or getattr(base, "family", "") != "gamma":
+        return None
+    from hysteresis.gamma import constrained_lstsq
+
+    a = np.asarray(design(u), dtype=np.float64)
+    n_w = a.shape[1]
+    if getattr(base, "fit_offset", False):
+        a = np.column_stack([a, np.ones(u.size)])
+    full = np.column_stack([a, phi])
+    if getattr(base, "constraint", "free") == "sum_to_one":
+        c = np.zeros(full.shape[1])
+        c[:n_w] = 1.0
+        x, _ = constrained_lstsq(full, y, c, 1.0)
+    else:
+        x = _lstsq(full, y)
+    return np.asarray(x[a.shape[1]:], dtype=np.float64)
+
+
 def _lstsq(a: FloatArray, b: FloatArray) -> FloatArray:
     """Least squares through the (tiny) normal equations: a few columns, many rows."""
     ata = a.T @ a
@@ -348,7 +402,7 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
     """
     ctx = tuple(sorted(effect.context(ident).items()))
 
-    def build(theta: float) -> ComposedModel:
+    def build(theta: Any) -> ComposedModel:
         m = ComposedModel(base_factory, [*fixed, Term(effect, theta, ctx)], iterations=iterations)
         return m.fit(ident)
 
@@ -358,11 +412,22 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
     best = int(np.argmin(sses))
     model = fits[best]
     if refine and effect.has_theta and len(grid) > 1:
-        lo = grid[max(best - 1, 0)]
-        hi = grid[min(best + 1, len(grid) - 1)]
+        # Refine the last component of theta between its grid neighbours (others fixed).
+        th = grid[best]
+        prefix = th[:-1] if isinstance(th, tuple) else ()
+        line = sorted(float(g[-1]) if isinstance(g, tuple) else float(g) for g in grid
+                      if (g[:-1] if isinstance(g, tuple) else ()) == prefix)
+        last = float(th[-1]) if isinstance(th, tuple) else float(th)
+        i = line.index(last)
+        lo, hi = line[max(i - 1, 0)], line[min(i + 1, len(line) - 1)]
+
+        def make(x: float) -> Any:
+            return (*prefix, float(x)) if isinstance(th, tuple) else float(x)
+
         if hi > lo:
-            res = minimize_scalar(lambda th: _sse(build(float(th)), ident), bounds=(lo, hi),
-                                  method="bounded", options={"maxiter": 10, "xatol": 1e-3 * (hi - lo)})
+            res = minimize_scalar(lambda x: _sse(build(make(x)), ident), bounds=(lo, hi),
+                                  method="bounded",
+                                  options={"maxiter": 10, "xatol": 1e-3 * (hi - lo)})
             if float(res.fun) < sses[best]:
-                model = build(float(res.x))
+                model = build(make(float(res.x)))
     return model
