@@ -44,11 +44,11 @@ StepFn = Callable[[float], Mapping[str, float]]
 
 __all__ = [
     "CHParams", "CameraModel", "FamilyStepper", "GAMMA_METHODS", "InverseStepper", "LoopResult",
-    "ModelErrorUKF", "PlayBank", "PlayBankStepper", "StrokeLimits", "as_stepper", "ch_simulate",
-    "estimate_model_error", "fit_coleman_hodgdon_ga", "fit_play_bank", "gamma_inverse",
-    "gamma_step_inverse", "mixed_sine_profile", "play_bank_from", "reduction", "run_ame_pd",
-    "run_inverse_with_error_correction", "run_open_loop", "run_vision_feedback", "seed000_target",
-    "seed002_motion", "segment_statistics", "sine_profile", "triangle_profile",
+    "ModelErrorUKF", "PlayBank", "PlayBankStepper", "StrokeLimits", "as_stepper", "camera_frames",
+    "ch_simulate", "estimate_model_error", "fit_coleman_hodgdon_ga", "fit_play_bank",
+    "gamma_inverse", "gamma_step_inverse", "mixed_sine_profile", "play_bank_from", "reduction",
+    "run_ame_pd", "run_inverse_with_error_correction", "run_open_loop", "run_vision_feedback",
+    "seed000_target", "seed002_motion", "segment_statistics", "sine_profile", "triangle_profile",
 ]
 
 
@@ -452,6 +452,20 @@ class _Camera:
         return delivered
 
 
+def camera_frames(values: Any, camera: CameraModel, *, dt_s: float = 0.01) -> FloatArray:
+    """What an offline analysis gets from the camera: the frames placed at their capture ticks
+    (NaN elsewhere). ``values`` is the true signal on the control grid; latency only decides
+    which frames have arrived by the end of the record."""
+    vv = as_1d(values, "values")
+    cam = _Camera(camera, dt_s)
+    out = np.full(vv.size, np.nan)
+    for k, val in enumerate(vv):
+        got = cam.observe(k * dt_s, float(val))
+        if got is not None:
+            out[min(max(int(round(got[0] / dt_s)), 0), k)] = got[1]
+    return out
+
+
 # ---------------------------------------------------------------------------------------------
 # Vision feedback (seed 002 baseline "Feedback Com")
 # ---------------------------------------------------------------------------------------------
@@ -623,23 +637,33 @@ class ModelErrorUKF:
 
 
 def estimate_model_error(
-    params: CHParams, pull: Any, alpha_meas: Any, *, dt_s: float, **ukf_kw: Any,
+    params: CHParams, pull: Any, alpha_meas: Any, *, dt_s: float, alpha0: float | None = None,
+    **ukf_kw: Any,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Offline run of the estimator over a recorded pull/angle pair (seed 000 section V.C).
 
-    Returns ``(alpha_model, alpha_est, f_h)``: the reference model alone (eq. 10), the UKF's
-    enhanced estimate alpha_EstM (eq. 16-18) and the model-error estimate."""
-    ll, aa = as_1d(pull, "l"), as_1d(alpha_meas, "alpha_meas")
-    if ll.shape != aa.shape:
-        raise HysteresisError("pull and alpha_meas differ in length")
-    model = ch_simulate(params, ll, alpha0=float(aa[0]))
-    ukf = ModelErrorUKF(params, dt_s=dt_s, alpha0=float(aa[0]), **ukf_kw)
+    ``alpha_meas`` may hold NaN where no measurement arrived (a 30 Hz camera on the 100 Hz
+    loop): the UKF then only predicts with the model. ``alpha0`` is the angle at rest (default:
+    the first finite measurement). Returns ``(alpha_model, alpha_est, f_h)``: the reference model
+    alone (eq. 10), the UKF's enhanced estimate alpha_EstM (eq. 16-18) and the model error."""
+    ll = as_1d(pull, "l")
+    aa = np.asarray(alpha_meas, dtype=np.float64)
+    if aa.ndim != 1 or ll.shape != aa.shape:
+        raise HysteresisError("pull and alpha_meas differ in shape")
+    finite = np.flatnonzero(np.isfinite(aa))
+    if alpha0 is None:
+        if finite.size == 0:
+            raise HysteresisError("alpha_meas has no finite measurement")
+        alpha0 = float(aa[finite[0]])
+    model = ch_simulate(params, ll, alpha0=alpha0)
+    ukf = ModelErrorUKF(params, dt_s=dt_s, alpha0=alpha0, **ukf_kw)
     est = np.empty_like(ll)
     fh = np.empty_like(ll)
-    est[0], fh[0] = aa[0], 0.0
+    est[0], fh[0] = alpha0, 0.0
     for k in range(1, ll.size):
         ukf.predict(float(ll[k - 1]), float((ll[k] - ll[k - 1]) / dt_s))
-        ukf.update(float(aa[k]))
+        if math.isfinite(aa[k]):
+            ukf.update(float(aa[k]))
         est[k], fh[k] = ukf.x
     return model, est, fh
 

@@ -23,6 +23,7 @@ from hysteresis.compensation import (
     StrokeLimits,
     _Camera,
     as_stepper,
+    camera_frames,
     ch_simulate,
     estimate_model_error,
     fit_coleman_hodgdon_ga,
@@ -313,3 +314,25 @@ def test_family_stepper_clips_and_reports_the_model_output_of_the_applied_comman
                                             _LinearStepModel())
     assert abs(res.error()[-1]) < 0.01
     assert np.all(np.isfinite(res.extra["f_hat"]))
+
+
+def test_camera_frames_sit_at_their_capture_ticks() -> None:
+    truth = np.arange(300, dtype=np.float64)
+    frames = camera_frames(truth, CameraModel(rate_hz=30.0, latency_s=0.045), dt_s=DT)
+    idx = np.flatnonzero(np.isfinite(frames))
+    assert idx.size == pytest.approx(90, abs=2)
+    assert np.array_equal(frames[idx], truth[idx])  # no noise: the value captured at that tick
+    assert np.all(np.diff(idx) >= 3) and np.all(np.diff(idx) <= 4)
+
+
+def test_ukf_on_sparse_camera_frames_still_beats_the_model() -> None:
+    pull = _triangle_pull(6.0)
+    plant = CHPlant(TRUTH)
+    truth = np.array([plant(float(x))["output"] for x in pull])
+    frames = camera_frames(truth, CameraModel(rate_hz=30.0, latency_s=0.0, noise_std=0.1))
+    model, est, _ = estimate_model_error(REFERENCE, pull, frames, dt_s=DT,
+                                         alpha0=float(truth[0]), R=0.01)
+    m, e = segment_statistics(truth, model), segment_statistics(truth, est)
+    assert reduction(m["abs_err"], e["abs_err"]) > 90.0
+    with pytest.raises(HysteresisError, match="no finite measurement"):
+        estimate_model_error(REFERENCE, pull[:5], np.full(5, np.nan), dt_s=DT)
