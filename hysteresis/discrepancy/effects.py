@@ -96,8 +96,8 @@ class RateDependence(Effect):
     def grid(self, ident: RunData) -> list[Any]:
         vmax = float(np.percentile(np.abs(ident.v), 99))
         span = float(np.ptp(ident.u))
-        return [(f * vmax, c * span) for f in (0.25, 0.5, 1.0, 3.0)
-                for c in (0.002, 0.005, 0.01, 0.02, 0.035, 0.05, 0.08)]
+        return [(f * vmax, c * span) for f in (0.3, 0.8, 3.0)
+                for c in (0.003, 0.01, 0.025, 0.05, 0.08)]
 
     def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx) -> FloatArray:
         v0, c = theta
@@ -200,7 +200,7 @@ class Saturation(Effect):
     uses_base = True
 
     def grid(self, ident: RunData) -> list[float]:
-        return [0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95, 0.98, 1.0]
+        return [0.5, 0.7, 0.8, 0.9, 0.95, 1.0]
 
     def features(
         self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
@@ -427,7 +427,7 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
         if hi > lo:
             res = minimize_scalar(lambda x: _sse(build(make(x)), ident), bounds=(lo, hi),
                                   method="bounded",
-                                  options={"maxiter": 10, "xatol": 1e-3 * (hi - lo)})
+                                  options={"maxiter": 8, "xatol": 1e-3 * (hi - lo)})
             if float(res.fun) < sses[best]:
                 model = build(make(float(res.x)))
     return model

@@ -219,6 +219,18 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
 def run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_name: str,
                  settings: WorkflowSettings | None = None,
                  model_error: dict[str, FloatArray] | None = None) -> dict[str, Any]:
+    """The whole workflow (see :func:`_run_workflow`), BLAS pinned to one thread: the problems
+    are thousands of tiny least-squares solves where threads only add contention."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _run_workflow(runs, base_factory, base_name=base_name, settings=settings,
+                             model_error=model_error)
+
+
+def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_name: str,
+                  settings: WorkflowSettings | None = None,
+                  model_error: dict[str, FloatArray] | None = None) -> dict[str, Any]:
     """The whole workflow; returns the report dict (plus ``_models``/``_evaluations`` for plots).
 
     ``model_error`` optionally maps identification run ids to a model-error signal (the UKF's
