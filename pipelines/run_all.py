@@ -240,8 +240,7 @@ def _track(tracker: Any, cfg: Mapping[str, Any], paths: Paths,
         "models": sorted(fits["key"].astype(str)) if fits is not None else [],
         "metrics": cache.hash_frame(metrics) if metrics is not None else "",
         "report": result.report.key if result.report is not None else "",
-        "tracking": tracking.git_commit(),
-    })
+    })  # the git commit is not part of it: the keys above already cover the code that matters
     tags = {"dataset_hash": data_hash, "pipeline_key": key}
     if result.ingest_report is not None:
         tags["ingest_rejected"] = str(result.ingest_report.get("n_rejected", 0))
