@@ -253,6 +253,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     evaluations = [current]
     remaining = [n for n in st.candidates if all(CANDIDATES[n].available(r) for r in all_runs)]
     skipped = [n for n in st.candidates if n not in remaining]
+    failed: dict[str, str] = {}
     for round_ in range(st.max_effects + 1):
         preds = [current.ident_pred.get(r.run_id, current.held_pred.get(r.run_id)) for r in all_runs]
         loc = locate(all_runs, [p for p in preds if p is not None])
@@ -268,7 +269,13 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         scores = []
         it = tqdm(remaining, desc=f"round {round_}: candidates", disable=not st.progress)
         for name in it:
-            scores.append(score_candidate(CANDIDATES[name], base_factory, groups, terms, current, n_eff))
+            try:
+                scores.append(score_candidate(CANDIDATES[name], base_factory, groups, terms,
+                                              current, n_eff))
+            except HysteresisError as err:
+                # The base cannot be refitted with this term (e.g. a density that no longer
+                # fits): the candidate is reported as not scorable, the others go on.
+                failed[name] = str(err)
         scores.sort(key=lambda s: s["delta_bic"])
         rankings.append([_public(s) for s in scores])
         winner = next((s for s in scores if _accept(s, st)), None)
@@ -323,6 +330,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
             f"no candidate is within the {base_name} family's reach"),
         "reach_remaining_fraction": reach,
         "candidates_skipped": {n: "needs a channel the runs do not carry (tension)" for n in skipped},
+        "candidates_failed": failed,
         "rankings": rankings,
         "summary": {
             "configurations": [g.key for g in groups],

@@ -1,0 +1,111 @@
+"""The discrepancy stage end to end: raw run folders (or foreign logs) in, report JSON, plots and
+an MLflow run out; and the real tendon-catheter runs (identify on data_1_*, judge on data_2_*).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from omegaconf import OmegaConf
+
+from pipelines.discrepancy import DiscrepancyError, run
+
+REPO = Path(__file__).resolve().parents[2]
+CATHETER = Path("/work/shared/real-data/tendon-catheter")
+REPORT_KEYS = {"base_family", "verdict", "effects", "located"}
+EFFECT_KEYS = {"name", "evidence", "rmse_before", "rmse_after", "heldout_rmse_before",
+               "heldout_rmse_after"}
+
+
+def cfg(source: Path, report: Path, **over: Any) -> dict[str, Any]:
+    base = OmegaConf.to_container(OmegaConf.load(REPO / "conf" / "discrepancy.yaml"))
+    assert isinstance(base, dict)
+    base.pop("defaults", None)
+    base.pop("hydra", None)
+    base.update(source=str(source), report=str(report), progress=False,
+                tracking={"enabled": False}, paths={"root": str(report.parent)})
+    base.update(over)
+    return base
+
+
+@pytest.fixture(scope="module")
+def raw_source(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A time-delay rig hidden in raw run folders of one configuration (short excitations)."""
+    rig = pytest.importorskip("rig_io.virtual")
+    from rig_io.folder import write_run_folder
+
+    root = tmp_path_factory.mktemp("raw")
+    amps = [6.0, 4.5, 3.0, 1.5]
+    exc = [
+        {"kind": "sine_decay", "amplitudes_mm": amps, "periods_per_amplitude": 2,
+         "frequency_hz": 0.25},
+        {"kind": "triangle_decay", "amplitudes_mm": amps, "periods_per_amplitude": 2,
+         "slope_mm_s": 6.0},
+        {"kind": "trapezoid_decay", "amplitudes_mm": amps, "periods_per_amplitude": 2,
+         "slope_mm_s": 6.0, "dwell_s": 1.0},
+    ]
+    for e in exc:
+        raw = rig.simulate_run(curve_angle_deg=90.0, radius_mm=30.0, excitation=e,
+                               effects={"time_delay": 1.0}, seed=5)
+        write_run_folder(raw, root)
+    return root
+
+
+def test_stage_names_the_hidden_effect_from_raw_run_folders(raw_source: Path, tmp_path: Path):
+    before = sorted(p.relative_to(raw_source) for p in raw_source.rglob("*"))
+    out = tmp_path / "reports" / "discrepancy.json"
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    rep = run(cfg(raw_source, out, base_family="gamma",
+                  tracking={"enabled": True, "uri": uri,
+                            "artifact_location": (tmp_path / "art").as_uri(),
+                            "experiment": "discrepancy-test"}))
+    on_disk = json.loads(out.read_text())
+    assert REPORT_KEYS <= set(on_disk)
+    assert on_disk["verdict"] == "missing_effects_found"
+    assert on_disk["effects"][0]["name"] == "time_delay"
+    assert EFFECT_KEYS <= set(on_disk["effects"][0])
+    assert on_disk["effects"][0]["heldout_rmse_after"] < 0.5 * on_disk["effects"][0][
+        "heldout_rmse_before"]
+    assert on_disk["located"] and on_disk["located"][0]["segments"]
+    assert rep["headline"].startswith("base gamma is missing: time_delay")
+    assert all(Path(p).is_file() for p in on_disk["plots"])
+    # raw runs are never written
+    assert sorted(p.relative_to(raw_source) for p in raw_source.rglob("*")) == before
+    # one MLflow run with before/after metrics, the report and the plots
+    from mlflow import MlflowClient
+
+    client = MlflowClient(tracking_uri=uri)
+    exp = client.get_experiment_by_name("discrepancy-test")
+    runs = client.search_runs([exp.experiment_id],
+                              "tags.stage = 'discrepancy' and tags.kind = 'analysis'")
+    assert len(runs) == 1
+    m = runs[0].data.metrics
+    assert m["after.heldout_rmse"] < m["before.heldout_rmse"]
+    arts = {a.path for a in client.list_artifacts(runs[0].info.run_id)}
+    assert {"reports", "plots"} <= arts
+
+
+def test_stage_rejects_a_missing_source(tmp_path: Path):
+    with pytest.raises(DiscrepancyError, match="does not exist"):
+        run(cfg(tmp_path / "nope", tmp_path / "r.json"))
+
+
+@pytest.mark.skipif(not CATHETER.is_dir(), reason="real catheter data not on this machine")
+def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: Path):
+    mapping = OmegaConf.to_container(
+        OmegaConf.load(REPO / "conf" / "importer" / "tendon_catheter.yaml"))
+    out = tmp_path / "catheter.json"
+    # Gamma with free weights and an offset: the catheter maps mm of tendon to degrees.
+    rep = run(cfg(CATHETER, out, importer=mapping, base_family="gamma",
+                  base_params={"constraint": "free", "fit_offset": True}))
+    assert rep["summary"]["identification_runs"][0].count("data_1_") == 5
+    assert len(rep["summary"]["heldout_runs"]) == 5
+    assert all("data_2_" in r for r in rep["summary"]["heldout_runs"])
+    assert rep["verdict"] == "missing_effects_found"
+    e = rep["effects"][0]
+    assert e["heldout_rmse_after"] < 0.8 * e["heldout_rmse_before"]
+    assert e["name"] in rep["headline"] and "%" in rep["headline"]
+    assert json.loads(out.read_text())["effects"][0]["name"] == e["name"]
