@@ -152,6 +152,23 @@ def choose_base(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
     return specs[best][0], specs[best][1], scores
 
 
+# -- seed 000 model error --------------------------------------------------------------------
+
+def ukf_model_error(runs: list[RunData]) -> dict[str, np.ndarray]:
+    """f_h of seed 000's active-modelling UKF around a Coleman-Hodgdon reference model, per
+    configuration's identification record (the signal the winner's term is regressed on)."""
+    from hysteresis.base import make_family
+    from hysteresis.discrepancy.workflow import group_runs
+    from hysteresis.ukf import ActiveModelUKF
+
+    out: dict[str, np.ndarray] = {}
+    for g in group_runs(runs):
+        ch = make_family("coleman_hodgdon", method="varpro").fit(g.ident.u, g.ident.y)
+        res = ActiveModelUKF(ch, dt=g.ident.dt).run(g.ident.u, g.ident.y)
+        out[g.ident.run_id] = np.asarray(res.f_h, dtype=np.float64)
+    return out
+
+
 # -- plots ----------------------------------------------------------------------------------
 
 def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
@@ -237,7 +254,14 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         noise_factor=float(wf.get("noise_factor", 2.0)),
         progress=progress,
     )
-    full = run_workflow(runs, factory, base_name=base, settings=settings)
+    model_error = None
+    if cfg.get("ukf_evidence", False):
+        try:
+            model_error = ukf_model_error(runs)
+        except HysteresisError as err:  # evidence only: never fatal
+            log.warning("UKF model-error evidence skipped: %s", err)
+    full = run_workflow(runs, factory, base_name=base, settings=settings,
+                        model_error=model_error)
     report = strip_private(full)
     report["base_params"] = base_params
     report["base_selection"] = auto_scores or None

@@ -100,7 +100,7 @@ def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: P
     out = tmp_path / "catheter.json"
     # Gamma with free weights and an offset: the catheter maps mm of tendon to degrees.
     rep = run(cfg(CATHETER, out, importer=mapping, base_family="gamma",
-                  base_params={"constraint": "free", "fit_offset": True}))
+                  base_params={"constraint": "free", "fit_offset": True}, ukf_evidence=True))
     assert rep["summary"]["identification_runs"][0].count("data_1_") == 5
     assert len(rep["summary"]["heldout_runs"]) == 5
     assert all("data_2_" in r for r in rep["summary"]["heldout_runs"])
@@ -109,3 +109,6 @@ def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: P
     assert e["heldout_rmse_after"] < 0.8 * e["heldout_rmse_before"]
     assert e["name"] in rep["headline"] and "%" in rep["headline"]
     assert json.loads(out.read_text())["effects"][0]["name"] == e["name"]
+    # seed 000's UKF model error regressed on the added term (evidence, one record)
+    (fit,) = e["evidence"]["model_error_regression"].values()
+    assert set(fit) == {"coefficient", "r2"}
