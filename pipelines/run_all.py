@@ -205,11 +205,14 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
         result.timings["fit"] = time.perf_counter() - t0
     if "validate" in wanted:
         t0 = time.perf_counter()
-        result.metrics, _ = validate.run(stage_config("validate", cfg), dataset=dataset)
+        # exactly the models of this invocation (not every model file left on disk)
+        result.metrics, _ = validate.run(stage_config("validate", cfg), dataset=dataset,
+                                         fits=result.fits)
         result.timings["validate"] = time.perf_counter() - t0
     if "report" in wanted:
         t0 = time.perf_counter()
-        result.report = report.run(stage_config("report", cfg), metrics=result.metrics)
+        result.report = report.run(stage_config("report", cfg), metrics=result.metrics,
+                                   fits=result.fits)
         result.timings["report"] = time.perf_counter() - t0
 
     if tracker.enabled:
