@@ -73,11 +73,14 @@ def machine_info() -> dict[str, Any]:
                 break
     except OSError:
         pass
-    versions = {}
-    for pkg in ("numpy", "scipy", "pandas", "numba", "mlflow", "hydra", "joblib", "matplotlib"):
+    from importlib.metadata import PackageNotFoundError, version
+
+    versions: dict[str, str | None] = {}
+    for pkg in ("numpy", "scipy", "pandas", "numba", "mlflow", "hydra-core", "joblib",
+                "matplotlib", "pyarrow", "rosbags"):
         try:
-            versions[pkg] = importlib.import_module(pkg).__version__
-        except Exception:  # noqa: BLE001 - a missing package is just not reported
+            versions[pkg] = version(pkg)
+        except PackageNotFoundError:
             versions[pkg] = None
     info["versions"] = versions
     try:
