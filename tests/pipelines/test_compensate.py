@@ -20,7 +20,8 @@ CONF = Path(__file__).resolve().parents[2] / "conf"
 
 class StandInRig:
     """tsm-bench: backlash in mm; bending joint: backlash in deg (motor-angle input) or the
-    Coleman-Hodgdon law of seed 000 in tendon pull (mm)."""
+    Coleman-Hodgdon law of seed 000 in tendon pull (mm) plus a slow drift (the model error
+    the UKF of seed 000 is there to estimate)."""
 
     def __init__(self, *, rig: str, curve_angle_deg: float, radius_mm: float,
                  effects: Any = None, seed: int = 0, sensors: Any = None) -> None:
@@ -45,7 +46,7 @@ class StandInRig:
             dl = command - self.pull
             self.alpha += p.A * abs(dl) * (p.C * self.pull - (self.alpha - p.O_alpha)) + p.B * dl
             self.pull = command
-            y = self.alpha
+            y = self.alpha + 10.0 * math.sin(0.3 * self.t)  # a slow error no CH model has
         else:
             self.w = min(command, max(command - self.play, self.w))
             self.y += 0.25 * (0.95 * self.w - self.y)
@@ -103,9 +104,9 @@ def test_quick_run_writes_every_table_report_and_plot(tmp_path: Path) -> None:
     t5 = tables["seed000_tracking"].set_index("scheme")
     assert t5.loc["ame_pd", "abs_err"] < t5.loc["pd", "abs_err"]
     est = tables["seed000_estimation"]
-    assert (est["abs_err_ratio"] < 0.2).all()
+    assert (est["abs_err_ratio"] < 0.3).all()  # the UKF removes > 70 % of the model error
     report = (tmp_path / "data" / "reports" / "compensation.md").read_text()
-    for heading in ("Table 4.2", "Table 4.4", "Table I", "Table 5", "Headline"):
+    for heading in ("Table 4.2", "Table 4.4", "Table I", "Table 5", "Headline numbers"):
         assert heading in report
     assert list((out / "plots").glob("seed001_A_mixed.png"))
     assert not list(out.rglob("*.tmp*"))  # atomic writes leave no temporaries
