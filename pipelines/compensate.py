@@ -641,9 +641,9 @@ def write_report(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any], pat
                   "", _md(t3, "{:.4f}"), "",
                   "## Seed 000 Table 5: PD vs AME-PD (and ours) tracking eq. 32", "",
                   _md(tables["seed000_tracking"], "{:.4f}"), ""]
-    shapes = tuple(f"seed001.{k}." for k in dict(s1["shapes"]))
+    prefixes = tuple(f"seed001.{k}." for k in dict(s1["shapes"]))
     shown = {k: v for k, v in metrics.items()
-             if not k.startswith("seed001.") or k.startswith(shapes)}
+             if not k.startswith("seed001.") or k.startswith(prefixes)}
     parts += ["## Headline numbers", "",
               "Reductions in %, errors in the output's unit; the other configurations' "
               "reductions are in MLflow.", "",
