@@ -163,8 +163,8 @@ class Drift(Effect):
     has_theta = True
 
     def grid(self, ident: RunData) -> list[float]:
-        dur = float(ident.ts[-1])
-        return [f * dur for f in (0.25, 0.5, 0.75, 1.0, 1.5, 3.0, 10.0)]
+        dur = float(np.max(ident.ts))  # the longest identification record
+        return [f * dur for f in (0.05, 0.1, 0.25, 0.5, 1.0, 1.5, 3.0, 10.0)]
 
     def features(
         self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
