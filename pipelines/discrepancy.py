@@ -157,13 +157,13 @@ def choose_base(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
 def ukf_model_error(runs: list[RunData]) -> dict[str, np.ndarray]:
     """f_h of seed 000's active-modelling UKF around a Coleman-Hodgdon reference model, per
     configuration's identification record (the signal the winner's term is regressed on)."""
-    from hysteresis.base import make_family
+    from hysteresis.coleman_hodgdon import ColemanHodgdonModel
     from hysteresis.discrepancy.workflow import group_runs
     from hysteresis.ukf import ActiveModelUKF
 
     out: dict[str, np.ndarray] = {}
     for g in group_runs(runs):
-        ch = make_family("coleman_hodgdon", method="varpro").fit(g.ident.u, g.ident.y)
+        ch = ColemanHodgdonModel(method="varpro").fit(g.ident.u, g.ident.y)
         res = ActiveModelUKF(ch, dt=g.ident.dt).run(g.ident.u, g.ident.y)
         out[g.ident.run_id] = np.asarray(res.f_h, dtype=np.float64)
     return out

@@ -11,7 +11,7 @@ from numba import njit
 FloatArray = npt.NDArray[np.float64]
 
 
-@njit(cache=True)  # type: ignore[misc]
+@njit(cache=True)
 def _play(u: Any, r: float, z0: float) -> Any:  # pragma: no cover - compiled
     out = np.empty_like(u)
     z = z0
@@ -52,7 +52,7 @@ def velocity(t: FloatArray, u: FloatArray, *, window_s: float = 0.1) -> FloatArr
     return np.asarray(np.gradient(smooth(u, w), t), dtype=np.float64)
 
 
-@njit(cache=True)  # type: ignore[misc]
+@njit(cache=True)
 def _direction(v: Any, eps: float) -> Any:  # pragma: no cover - compiled
     out = np.zeros_like(v)
     s = 0.0

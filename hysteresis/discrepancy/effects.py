@@ -245,7 +245,8 @@ def candidate(name: str) -> Effect:
     try:
         return CANDIDATES[name]
     except KeyError:
-        raise HysteresisError(f"unknown effect {name!r}; known: {', '.join(EFFECT_NAMES)}") from None
+        known = ", ".join(EFFECT_NAMES)
+        raise HysteresisError(f"unknown effect {name!r}; known: {known}") from None
 
 
 # -- composition -----------------------------------------------------------------------

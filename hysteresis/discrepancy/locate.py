@@ -35,7 +35,7 @@ def noise_floor(residual: FloatArray) -> float:
         return 0.0
     d = e[2:] - 2.0 * e[1:-1] + e[:-2]
     mad = float(np.median(np.abs(d - np.median(d))))
-    return 1.4826 * mad / np.sqrt(6.0)
+    return float(1.4826 * mad / np.sqrt(6.0))
 
 
 def phases(run: RunData, *, reversal_fraction: float = 0.25) -> FloatArray:
@@ -111,7 +111,7 @@ def cross_correlation(e: FloatArray, x: FloatArray, max_lag: int) -> tuple[Float
 
 
 def whiteness(residual: FloatArray, *, max_lag: int = 20) -> dict[str, float]:
-    """Ljung-Box test of the residual and the fraction of autocorrelations outside +-1.96/sqrt(N)."""
+    """Ljung-Box test of the residual; fraction of autocorrelations outside +-1.96/sqrt(N)."""
     n = residual.size
     r = autocorrelation(residual, max_lag)[1:]
     lags = np.arange(1, max_lag + 1)
@@ -194,7 +194,7 @@ def segments(item: RunResidual, floor: float, *, k: float = 3.0, top: int = 5,
     mag = smooth(np.abs(item.residual), w)
     above = mag > k * max(floor, 1e-12)
     edges = np.flatnonzero(np.diff(np.r_[0, above.astype(np.int8), 0]))
-    spans = []
+    spans: list[dict[str, Any]] = []
     for a, b in zip(edges[::2], edges[1::2], strict=True):
         if run.t[b - 1] - run.t[a] < min_duration_s:
             continue
@@ -209,7 +209,7 @@ def segments(item: RunResidual, floor: float, *, k: float = 3.0, top: int = 5,
             "peak_residual": float(seg[np.argmax(np.abs(seg))]),
             "integral": float(np.sum(np.abs(seg)) * run.dt),
         })
-    spans.sort(key=lambda s: -s["integral"])
+    spans.sort(key=lambda s: -float(s["integral"]))
     return spans[:top]
 
 

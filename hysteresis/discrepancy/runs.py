@@ -57,7 +57,8 @@ class RunData:
             if self.tension_out.size != self.t.size:
                 raise HysteresisError(f"run {self.run_id}: tension_out length differs from t")
         if self.role not in ROLES:
-            raise HysteresisError(f"run {self.run_id}: role must be one of {ROLES}, got {self.role!r}")
+            raise HysteresisError(
+                f"run {self.run_id}: role must be one of {ROLES}, got {self.role!r}")
 
     @property
     def n(self) -> int:

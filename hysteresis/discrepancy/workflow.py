@@ -86,7 +86,7 @@ def group_runs(runs: Sequence[RunData]) -> list[Group]:
 
 
 def effective_n(residual: FloatArray) -> float:
-    """Sample size corrected for correlation: N / (lag where the autocorrelation drops below 1/e)."""
+    """Sample size corrected for correlation: N / (lag where the autocorrelation < 1/e)."""
     n = residual.size
     acf = autocorrelation(residual, min(n - 1, 2000))
     below = np.flatnonzero(acf < np.exp(-1.0))
@@ -147,7 +147,9 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
     delta = np.concatenate([after.held_pred[r.run_id] - before.held_pred[r.run_id]
                             for g in groups for r in g.heldout])
     den = float(np.dot(delta, delta))
-    explained = float(np.dot(e_h0, delta) ** 2 / (den * float(np.dot(e_h0, e_h0)))) if den > 0 else 0.0
+    explained = 0.0
+    if den > 0:
+        explained = float(np.dot(e_h0, delta) ** 2 / (den * float(np.dot(e_h0, e_h0))))
     params = {}
     for g in groups:
         term = models[g.key].terms[-1]
@@ -255,7 +257,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     skipped = [n for n in st.candidates if n not in remaining]
     failed: dict[str, str] = {}
     for round_ in range(st.max_effects + 1):
-        preds = [current.ident_pred.get(r.run_id, current.held_pred.get(r.run_id)) for r in all_runs]
+        preds = [current.ident_pred.get(r.run_id, current.held_pred.get(r.run_id))
+                 for r in all_runs]
         loc = locate(all_runs, [p for p in preds if p is not None])
         model_name = "+".join([base_name, *[e["name"] for e in effects]])
         located.append({"round": round_, "model": model_name, **_compact_locate(loc)})
@@ -294,7 +297,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
             "heldout_per_run": winner["heldout_per_run"],
             "parameters": winner["parameters"],
             "runner_up": next((
-                {"name": s["name"], "delta_bic": s["delta_bic"], "relative_gain": s["relative_gain"]}
+                {"name": s["name"], "delta_bic": s["delta_bic"],
+                 "relative_gain": s["relative_gain"]}
                 for s in scores if s is not winner), None),
             "located_before": _signature_stats(loc),
         }
@@ -329,7 +333,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
             "it cannot be found missing from it" if within else
             f"no candidate is within the {base_name} family's reach"),
         "reach_remaining_fraction": reach,
-        "candidates_skipped": {n: "needs a channel the runs do not carry (tension)" for n in skipped},
+        "candidates_skipped": {n: "needs a channel the runs do not carry (tension)"
+                               for n in skipped},
         "candidates_failed": failed,
         "rankings": rankings,
         "summary": {
