@@ -50,25 +50,30 @@ def _thin(n: int, max_points: int) -> slice:
 def configuration_figure(preds: pd.DataFrame, path: Path, *, title: str,
                          fit_excitation: str, dpi: int = 72, max_points: int = 1500) -> Path:
     """Time series (left) and loops (right) of the measured output and every family."""
-    preds = preds[preds["fit_excitation"].astype(str) == fit_excitation]
-    kinds = sorted(preds["eval_excitation"].astype(str).unique(),
+    # Group once (no per-filter string conversion of 100k categorical rows).
+    preds = preds[np.asarray(preds["fit_excitation"] == fit_excitation, dtype=bool)]
+    groups = {(str(k), str(f), str(r)): g for (k, f, r), g in preds.groupby(
+        ["eval_excitation", "family", "run_id"], observed=True, sort=True)}
+    kinds = sorted({k for k, _, _ in groups},
                    key=lambda k: (k != fit_excitation, EXCITATION_ORDER.index(k)
                                   if k in EXCITATION_ORDER else 99, k))
-    families = sorted(preds["family"].astype(str).unique())
+    families = sorted({f for _, f, _ in groups})
     fig, axes = plt.subplots(max(len(kinds), 1), 2, figsize=(11, 2.6 * max(len(kinds), 1)),
                              squeeze=False, gridspec_kw={"width_ratios": [2.2, 1]})
     for row, kind in enumerate(kinds):
-        sub = preds[preds["eval_excitation"].astype(str) == kind]
-        first_run = sorted(sub["run_id"].astype(str).unique())[0]
-        sub = sub[sub["run_id"].astype(str) == first_run]
+        first_run = min(r for k, _, r in groups if k == kind)
         ax_t, ax_l = axes[row]
-        base = sub[sub["family"].astype(str) == families[0]]
+        base = groups[(kind, families[0], first_run)] if (kind, families[0], first_run) \
+            in groups else next(g for (k, _, r), g in groups.items()
+                                if k == kind and r == first_run)
         s = _thin(len(base), max_points)
         t = base["t_s"].to_numpy()[s]
         ax_t.plot(t, base["output"].to_numpy()[s], color="k", lw=1.4, label="measured")
         ax_l.plot(base["input"].to_numpy()[s], base["output"].to_numpy()[s], color="k", lw=1.2)
         for i, fam in enumerate(families):
-            f = sub[sub["family"].astype(str) == fam]
+            f = groups.get((kind, fam, first_run))
+            if f is None:
+                continue
             s2 = _thin(len(f), max_points)
             ax_t.plot(f["t_s"].to_numpy()[s2], f["predicted"].to_numpy()[s2], lw=0.9,
                       color=_color(fam, i), label=fam)
