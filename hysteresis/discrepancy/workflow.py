@@ -327,11 +327,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         "effects": effects,
         "located": located,
         "within_base_reach": within,
-        "within_base_reach_note": (
-            f"{', '.join(within)} {'is' if len(within) == 1 else 'are'} already within the "
-            f"{base_name} family's reach (the plain family absorbs that term's distortion), so "
-            "it cannot be found missing from it" if within else
-            f"no candidate is within the {base_name} family's reach"),
+        "within_base_reach_note": _reach_note(within, base_name),
         "reach_remaining_fraction": reach,
         "candidates_skipped": {n: "needs a channel the runs do not carry (tension)"
                                for n in skipped},
@@ -350,6 +346,15 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     report["_evaluations"] = evaluations
     report["_groups"] = groups
     return report
+
+
+def _reach_note(within: list[str], base_name: str) -> str:
+    if not within:
+        return f"no candidate is within the {base_name} family's reach"
+    one = len(within) == 1
+    return (f"{', '.join(within)} {'is' if one else 'are'} already within the {base_name} "
+            "family's reach (the plain family absorbs that term's distortion), so "
+            f"{'it' if one else 'they'} cannot be found missing from it")
 
 
 def _public(s: dict[str, Any]) -> dict[str, Any]:
