@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hysteresis.base import HysteresisError, make_family
 import hysteresis.discrepancy.locate as L
+from hysteresis.base import HysteresisError, make_family
 from hysteresis.discrepancy._ops import play, shift
 from hysteresis.discrepancy.bases import AffineModel, PlaySumModel
 from hysteresis.discrepancy.effects import (
