@@ -24,6 +24,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -209,16 +210,28 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
         result.metrics, _ = validate.run(stage_config("validate", cfg), dataset=dataset,
                                          fits=result.fits)
         result.timings["validate"] = time.perf_counter() - t0
-    if "report" in wanted:
-        t0 = time.perf_counter()
-        result.report = report.run(stage_config("report", cfg), metrics=result.metrics,
-                                   fits=result.fits)
-        result.timings["report"] = time.perf_counter() - t0
-
-    if tracker.enabled:
-        t0 = time.perf_counter()
-        result.parent_run_id, result.up_to_date = _track(tracker, cfg, paths, result)
-        result.timings["tracking"] = time.perf_counter() - t0
+    # MLflow's child runs are logged in a background thread while the report draws (its
+    # figures render in worker processes); the figures are attached to the runs afterwards.
+    tracking_state: TrackState | None = None
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="mlflow") as pool:
+        # (Hydra's compose is not thread-safe: the fit config is composed here, not there.)
+        fit_cfg = stage_config("fit", cfg) if tracker.enabled else {}
+        pending = (pool.submit(_track_start, tracker, cfg, fit_cfg, paths, result)
+                   if tracker.enabled else None)
+        if "report" in wanted:
+            t0 = time.perf_counter()
+            result.report = report.run(stage_config("report", cfg), metrics=result.metrics,
+                                       fits=result.fits)
+            result.timings["report"] = time.perf_counter() - t0
+        if pending is not None:
+            t0 = time.perf_counter()
+            tracking_state = pending.result()
+            _track_finish(tracker, tracking_state, result)
+            result.parent_run_id = tracking_state.parent
+            result.up_to_date = tracking_state.up_to_date
+            # time spent on MLflow beyond the stages it overlapped with
+            result.timings["tracking"] = time.perf_counter() - t0
+            result.timings["tracking_overlapped"] = tracking_state.seconds
     result.timings["total"] = time.perf_counter() - total
     write_text_atomic(paths.reports / "pipeline_timing.json",
                       json.dumps({k: round(v, 3) for k, v in result.timings.items()}, indent=1))
@@ -230,20 +243,29 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
     return result
 
 
-def _track(tracker: Any, cfg: Mapping[str, Any], paths: Paths,
-           result: PipelineResult) -> tuple[str, bool]:
-    """Parent run + one child per fitted model; or, when nothing changed, a pointer run."""
-    from pipelines import report as report_mod
-    from pipelines import tracking
+@dataclass
+class TrackState:
+    parent: str
+    up_to_date: bool
+    #: child run ids with the configuration label each one shows
+    children: list[tuple[str, str]] = field(default_factory=list)
+    seconds: float = 0.0
 
+
+def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any],
+                 paths: Paths, result: PipelineResult) -> TrackState:
+    """Parent run + one child per fitted model; or, when nothing changed, a pointer run."""
+    from pipelines import tracking
+    from pipelines.stages import Configuration
+
+    start = time.perf_counter()
     fits, metrics = result.fits, result.metrics
     data_hash = dataset_hash(paths.processed)
     key = cache.combine({
         "stage": "pipeline", "dataset": data_hash,
         "models": sorted(fits["key"].astype(str)) if fits is not None else [],
         "metrics": cache.hash_frame(metrics) if metrics is not None else "",
-        "report": result.report.key if result.report is not None else "",
-    })  # the git commit is not part of it: the keys above already cover the code that matters
+    })  # no git commit: the model keys already cover the code that matters
     tags = {"dataset_hash": data_hash, "pipeline_key": key}
     if result.ingest_report is not None:
         tags["ingest_rejected"] = str(result.ingest_report.get("n_rejected", 0))
@@ -261,22 +283,38 @@ def _track(tracker: Any, cfg: Mapping[str, Any], paths: Paths,
         tracker.log_artifact(parent, hydra_dir / ".hydra", ".hydra")
     if previous:
         tracker.log(parent, tags={"up_to_date": "true", "same_as": previous[0].info.run_id})
-        return parent, True
-    if result.report is not None:
-        report_mod.log_report(tracker, parent, result.report)
+        return TrackState(parent, True, seconds=time.perf_counter() - start)
+    state = TrackState(parent, False)
     if fits is not None:
-        fit_cfg = stage_config("fit", cfg)
         base = tracking.flatten({k: v for k, v in fit_cfg.items()
                                  if k not in ("family", "family_overrides", "tracking",
                                               "families")})
-        tracking.log_model_runs(
+        ids = tracking.log_model_runs(
             tracker, parent, fits=fits, metrics=metrics, base_params=base, tags=tags,
-            hydra_dir=hydra_dir / ".hydra" if hydra_dir else None,
-            plots=result.report.config_plots if result.report is not None else None,
+            hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, plots=None,
             stage="pipeline", progress=bool(cfg.get("progress", True)),
         )
-    tracker.log(parent, tags={"complete": "true"})
-    return parent, False
+        labels = [Configuration(str(r["rig"]), tracking._num(r["curve_angle_deg"]),
+                                tracking._num(r["radius_mm"])).label
+                  for r in fits.to_dict("records")]
+        state.children = list(zip(ids, labels, strict=True))
+    state.seconds = time.perf_counter() - start
+    return state
+
+
+def _track_finish(tracker: Any, state: TrackState, result: PipelineResult) -> None:
+    """After the report: its files on the parent, each configuration's figures on its runs."""
+    from pipelines import report as report_mod
+
+    rep = result.report
+    if rep is not None and (not state.up_to_date or not rep.cached):
+        report_mod.log_report(tracker, state.parent, rep)
+    if rep is not None:
+        for run_id, label in state.children:
+            for fig in rep.config_plots.get(label, []):
+                tracker.log_artifact(run_id, fig, "plots")
+    if not state.up_to_date:
+        tracker.log(state.parent, tags={"complete": "true"})
 
 
 @hydra.main(config_path="../conf", config_name="pipeline", version_base="1.3")
