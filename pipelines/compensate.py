@@ -140,9 +140,16 @@ def with_lead_in(yd: np.ndarray, *, start: float, lead_s: float) -> np.ndarray:
     return np.concatenate([ramp, yd])
 
 
+def command_travel(res: LoopResult) -> float:
+    """Total travel of the command (sum |du|): a chatter check - a compensator that dithers
+    its command across the backlash travels far more than the feed-forward input."""
+    return float(np.sum(np.abs(np.diff(res.command))))
+
+
 def _stats_row(res: LoopResult, *, skip_s: float = 0.0, **keys: Any) -> dict[str, Any]:
     s = res.statistics(skip_s=skip_s)
     s["rsse"] = math.sqrt(s["sse"])  # Table 4.2's "RMSE" column is sqrt(SSE) (see docs)
+    s["command_travel"] = command_travel(res)
     return {**keys, "scheme": res.scheme, **s}
 
 
@@ -491,7 +498,8 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
     for res in runs.values():
         s = res.statistics(skip_s=lead)
         track_rows.append({"scheme": res.scheme, "abs_err": s["mean_abs_error"],
-                           "var": s["var_error"], "rmse": s["rmse"]})
+                           "var": s["var_error"], "rmse": s["rmse"],
+                           "command_travel": command_travel(res)})
     if art.plots:
         art.figure("seed000_tracking", plot_runs("seed 000 eq. 32 tracking", runs))
         import matplotlib.pyplot as plt
@@ -625,8 +633,15 @@ def write_report(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any], pat
                                                           strict=True)]
         wide = g.pivot_table(index="scheme", columns=["case", "signal"], values="rmse",
                              aggfunc="first")
-        wide.columns = [f"{c} {s}" for c, s in wide.columns]
-        avg = t1.groupby(["scheme", "case"])["rmse"].mean().unstack()
+        # The paper's order: cases as configured, periodic motions by frequency, then N-P.
+        cases = list(dict.fromkeys(t1["case"]))
+        sigs = list(dict.fromkeys(t1["signal"]))
+        wide = wide.reindex(columns=[(c, x) for c in cases for x in sigs if (c, x) in wide])
+        wide.columns = [f"{c} {x}" for c, x in wide.columns]
+        order = [x for x in ("none", "vision_feedback", "bouc_wen_ff", "ours") if x in wide.index]
+        wide = wide.reindex(order)
+        avg = t1.groupby(["scheme", "case"])["rmse"].mean().unstack().reindex(order)
+        avg = avg.reindex(columns=cases)
         avg.columns = [f"{c} avg" for c in avg.columns]
         parts += ["## Seed 002 Table I: RMSE (deg) against the tracker", "",
                   f"{cfg['seed002']['trials']} trials per cell (mean ± sd), omega in rad/s; "

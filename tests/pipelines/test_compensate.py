@@ -87,6 +87,7 @@ def test_quick_run_writes_every_table_report_and_plot(tmp_path: Path) -> None:
                                       check_dtype=False)
     t42 = tables["seed001_table42"]
     assert set(t42["scheme"]) >= {"none", "gamma", "bouc_wen", "ours"}
+    assert (t42["command_travel"] > 0).all()
     assert set(t42["shape"]) == {"A", "B"} and set(t42["profile"]) == {"mixed", "sine", "triangle"}
     # Ours removes >= 90 % of the RMSE on the stand-in bench for every profile and shape.
     for (_, _), g in t42.groupby(["shape", "profile"]):
