@@ -564,7 +564,7 @@ def fit_coleman_hodgdon_ga(
         sim = ch_simulate(CHParams(x[0], x[1], x[2], O_l, x[3]), ll, alpha0=float(aa[0]))
         return float(np.mean((aa - sim) ** 2))
 
-    # Decimate for speed: the model is slow, and eq. 10 is rate-independent.
+    # Callers decimate long records first (eq. 10 is rate-independent, the loop is Python).
     res = optimize.differential_evolution(
         mse, [A_b, B_b, C_b, Oa_b], seed=seed, maxiter=maxiter, popsize=popsize, tol=1e-8,
         polish=True,
