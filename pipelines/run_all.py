@@ -66,12 +66,17 @@ def compose_stage(name: str, overrides: Sequence[str] = ()) -> dict[str, Any]:
     """A stage's own config (``conf/<name>.yaml``) composed with overrides, as a plain dict."""
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import MissingConfigException
 
-    if GlobalHydra.instance().is_initialized():
+    gh = GlobalHydra.instance()
+    if gh.is_initialized():  # inside a Hydra app (run_all's own): its search path is conf/
+        try:
+            return to_container(compose(config_name=name, overrides=list(overrides)))
+        except MissingConfigException:
+            # initialised on another config folder (e.g. left over by a test): start clean
+            gh.clear()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose(config_name=name, overrides=list(overrides))
-    else:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            cfg = compose(config_name=name, overrides=list(overrides))
     return to_container(cfg)
 
 
