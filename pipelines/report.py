@@ -374,6 +374,13 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
           "on the identification record at the rig's sample rate (`gamma_weights.parquet`).")
     if not gamma.empty:
         doc.table(gamma.drop(columns=["thresholds", "fit_excitation"]))
+    if metrics["fit_excitation"].nunique() > 1:
+        doc.h(2, f"Cross-excitation matrix (mean {metric} over the configurations)")
+        doc.p("Rows: the model's identification excitation; columns: the evaluated one.")
+        cross = metrics.pivot_table(index=["family", "fit_excitation"],
+                                    columns="eval_excitation", values=metric, aggfunc="mean",
+                                    observed=True)
+        doc.table(cross.reset_index())
     doc.h(2, "Error against curve angle and radius")
     for caption, fig in shape_figs:
         doc.img(fig, caption)

@@ -101,6 +101,13 @@ def test_cross_excitation_matrix(tmp_path: Path) -> None:
     assert pairs == {(a, b) for a in kinds for b in kinds}
     assert ((metrics["fit_excitation"] == metrics["eval_excitation"])
             == (metrics["split"] == "fit")).all()
+    # the report shows the matrix (mean RMSE, identification x evaluation excitation)
+    from pipelines import report as report_stage
+
+    report_stage.run({**cfg, "fit_excitation": "sine_decay", "plots": {"dpi": 30}})
+    md = (tmp_path / "data/reports/report.md").read_text()
+    assert "Cross-excitation matrix" in md
+    assert "| linear | triangle_decay |" in md
     # without cross only the identification excitation itself is evaluated
     only_fit, _ = validate_stage.run({**cfg, "heldout": [], "cross": False}, dataset=data)
     assert (only_fit["split"] == "fit").all() and len(only_fit) == 3
