@@ -107,31 +107,48 @@ class RateDependence(Effect):
 class TendonElongation(Effect):
     name = "tendon_elongation"
     signature = (
-        "extra load-dependent compliance: output lag grows with tendon tension (quadratically), "
-        "largest at high tension and large amplitude, tensions themselves unchanged"
+        "extra load-dependent compliance: the tendon stretches by c T^2 per unit length, so the "
+        "output falls short by the integral of T^2 along the tendon; the shortfall follows the "
+        "tension profile (stiff at low tension, soft at high), not the sliding speed"
     )
-    term = ("c1 (T_in^2 - T_in(0)^2) + c2 (T_out^2 - T_out(0)^2) (measured tensions; quadratic "
-            "compliance integrated along the tendon; c2 only where the output tension is logged)")
+    term = ("c1 (T_in^2 - T_in(0)^2) + c2 mean_{r in [0, R]} (exp(2 play_r(ln T_in)) - start): "
+            "under capstan friction the tension at wrap angle theta is exp(play_{mu theta}"
+            "(ln T_in)), so the mean over thresholds spreads T^2 along the friction path "
+            "(R = mu x total wrap, a fraction of the identification run's ln T_in range, on a "
+            "grid); c1 carries the free input end and the nearly straight lead-in")
     n_linear = 2
+    has_theta = True
+    #: Play thresholds averaged over the friction path (the profile's quadrature).
+    n_profile = 8
 
     def available(self, run: RunData) -> bool:
         return run.tension is not None
+
+    def grid(self, ident: RunData) -> list[float]:
+        return [0.1, 0.2, 0.35, 0.5, 0.75, 1.0]
 
     def features(
         self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
     ) -> FloatArray:
         if run.tension is None:
             raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
-        scale = max(ctx.get("tension_scale", 1.0), 1e-12)
-        cols = [(run.tension**2 - run.tension[0] ** 2) / scale]
-        if run.tension_out is not None and ctx.get("use_out", 1.0) > 0:
-            # Stretch integrates T^2 along the tendon: both ends' tensions bound the profile.
-            cols.append((run.tension_out**2 - run.tension_out[0] ** 2) / scale)
-        return np.column_stack(cols)
+        lt = np.log(np.maximum(run.tension, ctx["t_floor"]))
+        near = np.exp(2.0 * lt)
+        path = np.zeros(run.n)
+        for r in np.linspace(0.0, theta * ctx["log_span"], self.n_profile):
+            # Tension at one point of the friction path (capstan: a play in log tension).
+            p = np.exp(2.0 * play(lt, float(r), z0=float(lt[0])))
+            path += p - p[0]
+        scale = ctx["tension_scale"]
+        return np.column_stack([(near - near[0]) / scale, path / (self.n_profile * scale)])
 
     def context(self, ident: RunData) -> Ctx:
-        t = ident.tension if ident.tension is not None else np.ones(1)
-        return {"tension_scale": float(np.max(t**2)), "use_out": 0.0}
+        t = ident.tension if ident.tension is not None else np.ones(2)
+        # Floor for the log: a slack tendon reads ~0 N (load-cell noise may go negative).
+        floor = max(0.02 * float(np.percentile(np.abs(t), 99)), 1e-6)
+        lt = np.log(np.maximum(t, floor))
+        return {"tension_scale": max(float(np.max(t**2)), 1e-12), "t_floor": floor,
+                "log_span": max(float(np.ptp(lt)), 1e-9)}
 
 
 class TimeDelay(Effect):

@@ -80,6 +80,9 @@ def test_clean_runs_have_no_missing_effect():
     ("drift", 2.0),
     ("asymmetry", 2.0),
     ("dead_zone", 2.0),
+    # 8 = a polymer tendon (extra strain 5e-6 x 8 x T^2: 0.4 % at 10 N); a steel or tungsten
+    # cable's stretch is inside the base family's reach and the rig's error floor.
+    ("tendon_elongation", 8.0),
 ])
 def test_hidden_effect_is_named_first_and_halves_the_heldout_error(effect, strength):
     rep = report({effect: strength})
@@ -91,16 +94,19 @@ def test_hidden_effect_is_named_first_and_halves_the_heldout_error(effect, stren
     assert e["evidence"]["runs_improved"] == 1.0
 
 
-@pytest.mark.parametrize(("effect", "strength"), [
-    ("rate_dependence", 1.0),
-    ("tendon_elongation", 8.0),
-])
-def test_friction_and_compliance_effects_are_named_first(effect, strength):
-    # Named first, but the held-out reduction stays near 30 %: both act through the tendon
-    # tension, which the rig's friction texture also modulates (see docs/discrepancy.md).
-    e = first(report({effect: strength}))
-    assert e["name"] == effect
-    assert reduction(e) >= 0.25, (effect, reduction(e))
+def test_rate_dependence_is_named_first_and_reaches_the_rigs_error_floor():
+    # Named first, ahead of tendon_elongation (whose tension columns also see the wider
+    # loops), but the held-out reduction stays near a third: the rig's friction texture is
+    # multiplied by the same speed factor, so the error floor of the rate runs is ~0.085 mm
+    # against 0.063 mm on clean runs (docs/discrepancy.md: with the texture switched off the
+    # same term removes about half).
+    rep = report({"rate_dependence": 1.0})
+    e = first(rep)
+    assert e["name"] == "rate_dependence"
+    assert e["evidence"]["runner_up"]["name"] == "tendon_elongation"
+    assert reduction(e) >= 0.3, reduction(e)
+    assert e["heldout_rmse_after"] < 0.095
+    assert e["evidence"]["runs_improved"] == 1.0
 
 
 def test_dead_zone_is_within_reach_of_play_operators_with_an_offset():
