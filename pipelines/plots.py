@@ -22,6 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
 
 from rig_io.atomic import atomic_path  # noqa: E402
 
@@ -132,9 +133,15 @@ def shape_heatmaps(metrics: pd.DataFrame, path: Path, *, metric: str, split: str
     grid = m.groupby(["family", "curve_angle_deg", "radius_mm"], observed=True)[metric].mean()
     angles = sorted(m["curve_angle_deg"].unique())
     radii = sorted(m["radius_mm"].unique())
-    vmax = float(np.nanpercentile(grid.to_numpy(), 98)) if len(grid) else 1.0
-    vmin = float(np.nanmin(grid.to_numpy())) if len(grid) else 0.0
-    fig, axes = plt.subplots(1, len(families), figsize=(2.6 * len(families) + 1.2, 3.2),
+    values = grid.to_numpy(dtype=float)
+    positive = values[np.isfinite(values) & (values > 0)]
+    # A log colour scale: the linear baseline is often 5-10x worse than the hysteresis
+    # families, and on a linear scale it would flatten their shape dependence to one colour.
+    vmin = float(positive.min()) if positive.size else 1e-12
+    vmax = float(positive.max()) if positive.size else 1.0
+    norm = LogNorm(vmin=vmin, vmax=max(vmax, vmin * (1 + 1e-9)))
+    mid = float(np.sqrt(vmin * vmax))
+    fig, axes = plt.subplots(1, len(families), figsize=(3.4 * len(families) + 1.2, 3.4),
                              squeeze=False)
     image = None
     for ax, fam in zip(axes[0], families, strict=True):
@@ -142,8 +149,8 @@ def shape_heatmaps(metrics: pd.DataFrame, path: Path, *, metric: str, split: str
         for (f, a, r), v in grid.items():
             if f == fam:
                 z[radii.index(r), angles.index(a)] = v
-        image = ax.imshow(z, origin="lower", aspect="auto", cmap="magma_r", vmin=vmin,
-                          vmax=max(vmax, vmin + 1e-12))
+        image = ax.imshow(np.where(z > 0, z, np.nan), origin="lower", aspect="auto",
+                          cmap="magma_r", norm=norm)
         ax.set_xticks(range(len(angles)), [f"{a:g}" for a in angles], fontsize=7)
         ax.set_yticks(range(len(radii)), [f"{r:g}" for r in radii], fontsize=7)
         ax.set_title(fam, fontsize=9)
@@ -151,13 +158,16 @@ def shape_heatmaps(metrics: pd.DataFrame, path: Path, *, metric: str, split: str
         for i in range(len(radii)):
             for j in range(len(angles)):
                 if np.isfinite(z[i, j]):
-                    ax.text(j, i, f"{z[i, j]:.2g}", ha="center", va="center", fontsize=6,
-                            color="w" if z[i, j] > (vmin + vmax) / 2 else "k")
+                    # Two significant digits without the leading "0" so labels fit the cell.
+                    label = f"{z[i, j]:.2g}"
+                    label = label[1:] if label.startswith("0.") else label
+                    ax.text(j, i, label, ha="center", va="center", fontsize=6,
+                            color="w" if z[i, j] > mid else "k")
     axes[0][0].set_ylabel("radius [mm]", fontsize=8)
     if image is not None:
         fig.colorbar(image, ax=list(axes[0]), shrink=0.85, label=f"{split} {metric}")
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path, dpi)
+    return _save(fig, path, max(dpi, 100))
 
 
 def error_vs_shape_lines(metrics: pd.DataFrame, path: Path, *, metric: str, split: str,
