@@ -7,9 +7,11 @@ pure functions, and hands the workflow only the dataset rows: the effect is hidd
 
 Strengths: 1 = the rig's nominal size (docs/virtual-rig.md). Where the nominal size is smaller
 than the base family's own structural error on clean runs (the rig's friction texture leaves
-~0.06 mm RMSE that no family removes), a strength of 2 is used so that halving the held-out
-RMSE is possible at all; tendon_elongation and rate_dependence are named first but stay above
-half (see the assertions and docs/discrepancy.md).
+~0.063 mm RMSE that no family removes), a larger strength is used so that halving the held-out
+RMSE is possible at all: 2 for drift, asymmetry and dead_zone, 8 for tendon_elongation (a
+polymer tendon). rate_dependence (1) is named first but stays near -33 %: the friction texture
+is multiplied by the same speed factor, which raises the floor of those runs (see
+docs/discrepancy.md).
 """
 
 from __future__ import annotations
@@ -121,10 +123,15 @@ def test_dead_zone_is_within_reach_of_play_operators_with_an_offset():
     assert dz["summary"]["heldout_rmse_before"] < 1.4 * clean["summary"]["heldout_rmse_before"]
 
 
-def test_two_hidden_effects_are_both_named():
-    rep = report({"time_delay": 1.0, "drift": 2.0})
+@pytest.mark.parametrize("effects", [
+    {"time_delay": 1.0, "drift": 2.0},
+    # the tension-profile term and a latency: one shapes the loop, the other shifts it in time
+    {"tendon_elongation": 8.0, "time_delay": 1.0},
+])
+def test_two_hidden_effects_are_both_named(effects):
+    rep = report(effects)
     names = [e["name"] for e in rep["effects"]]
-    assert set(names[:2]) == {"time_delay", "drift"}, names
+    assert set(names[:2]) == set(effects), names
     # each added effect lowers the held-out error further
     h = [rep["effects"][0]["heldout_rmse_before"]]
     h += [e["heldout_rmse_after"] for e in rep["effects"]]
