@@ -708,22 +708,16 @@ def _track(cfg: Mapping[str, Any], tables: Mapping[str, pd.DataFrame],
     root = (cfg.get("paths") or {}).get("root", ".")
     tracker = Tracker(settings_from_config(tracking, root=root))
     with StageRun(tracker, "compensate") as stage:
-        run_id = tracker.start_run("compensate", parent_id=stage.parent_id,
-                                   tags={"stage": "compensate", "kind": "experiment"})
-        try:
+        with tracker.run("compensate", parent_id=stage.parent_id,
+                         tags={"stage": "compensate", "kind": "experiment"}) as run_id:
             exps = {k: cfg[k] for k in ("seed001", "seed002", "seed000") if k in cfg}
-            params = flatten(exps)
-            tracker.log(run_id, params=params, metrics={k: v for k, v in metrics.items()
-                                                        if math.isfinite(v)})
+            tracker.log(run_id, params=flatten(exps),
+                        metrics={k: v for k, v in metrics.items() if math.isfinite(v)})
             for name, frame in tables.items():
                 tracker.log_table(run_id, frame, f"tables/{name}.json")
             for path in art.files:
                 sub = "plots" if path.suffix == ".png" else "reports"
                 tracker.log_artifact(run_id, path, sub)
-        except Exception:
-            tracker.end_run(run_id, status="FAILED")
-            raise
-        tracker.end_run(run_id)
 
 
 def _main() -> None:

@@ -17,13 +17,14 @@ nested runs never step on each other.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import os
 import random
 import subprocess
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
@@ -243,6 +244,18 @@ class Tracker:
 
     def end_run(self, run_id: str, *, status: str = "FINISHED") -> None:
         retry(self.client.set_terminated, run_id, status=status)
+
+    @contextlib.contextmanager
+    def run(self, name: str, *, parent_id: str | None = None,
+            tags: Mapping[str, Any] | None = None) -> Iterator[str]:
+        """A run that ends FINISHED, or FAILED when the block raises (so none stays RUNNING)."""
+        run_id = self.start_run(name, parent_id=parent_id, tags=tags)
+        try:
+            yield run_id
+        except BaseException:
+            self.end_run(run_id, status="FAILED")
+            raise
+        self.end_run(run_id)
 
     def log(self, run_id: str, *, params: Mapping[str, Any] | None = None,
             metrics: Mapping[str, float] | None = None,
