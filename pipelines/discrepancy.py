@@ -310,10 +310,9 @@ def _track(cfg: Mapping[str, Any], report: Mapping[str, Any], report_path: Path,
     root = (cfg.get("paths") or {}).get("root", ".")
     tracker = Tracker(settings_from_config(tracking, root=root))
     with StageRun(tracker, "discrepancy") as stage:
-        run_id = tracker.start_run("discrepancy", parent_id=stage.parent_id,
-                                   tags={"stage": "discrepancy", "kind": "analysis",
-                                         "verdict": report["verdict"]})
-        try:
+        with tracker.run("discrepancy", parent_id=stage.parent_id,
+                         tags={"stage": "discrepancy", "kind": "analysis",
+                               "verdict": report["verdict"]}) as run_id:
             s = report["summary"]
             metrics = {
                 "before.rmse": s["rmse_before"], "after.rmse": s["rmse_after"],
@@ -333,10 +332,6 @@ def _track(cfg: Mapping[str, Any], report: Mapping[str, Any], report_path: Path,
             tracker.log_artifact(run_id, report_path, "reports")
             for p in plots:
                 tracker.log_artifact(run_id, p, "plots")
-        except Exception:
-            tracker.end_run(run_id, status="FAILED")
-            raise
-        tracker.end_run(run_id)
 
 
 def _main() -> None:
