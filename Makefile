@@ -10,7 +10,6 @@ export PYTHONHASHSEED := 0
 # numba caches compiled kernels beside the sources; keep them out of the tree.
 export NUMBA_CACHE_DIR := $(CURDIR)/.venv/numba-cache
 export MPLBACKEND := Agg
-export HYDRA_FULL_ERROR := 1
 
 # Extra Hydra overrides for any stage target: make fit ARGS="family=gamma"
 ARGS ?=

@@ -18,11 +18,12 @@ import logging
 import math
 import tempfile
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from hysteresis.base import HysteresisError
@@ -171,6 +172,17 @@ def ukf_model_error(runs: list[RunData]) -> dict[str, np.ndarray]:
 
 # -- plots ----------------------------------------------------------------------------------
 
+def _breaks(starts: Sequence[int]) -> Callable[[Any], npt.NDArray[np.float64]]:
+    """A function inserting NaN before every record start after the first (line breaks)."""
+    idx = [int(i) for i in starts if int(i) > 0]
+
+    def cut(x: Any) -> npt.NDArray[np.float64]:
+        arr = np.asarray(x, dtype=np.float64)
+        return np.insert(arr, idx, np.nan) if idx else arr
+
+    return cut
+
+
 def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
     """Before/after loops and residuals per held-out run, located segments shaded."""
     import matplotlib
@@ -189,15 +201,21 @@ def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
         for ax, run in zip(axes, runs, strict=True):
             p0 = first.ident_pred.get(run.run_id, first.held_pred.get(run.run_id))
             p1 = last.ident_pred.get(run.run_id, last.held_pred.get(run.run_id))
-            ax[0].plot(run.u, run.y, "k", lw=0.8, label="measured")
-            ax[0].plot(run.u, p0, "C0", lw=0.8, label="base")
-            ax[0].plot(run.u, p1, "C3", lw=0.8, ls="--", label="base + effects")
+            # Several identification records are one concatenated run: break every line at a
+            # record start so no stroke joins the end of one record to the start of the next.
+            cut = _breaks(run.starts)
+            u, y, ts = cut(run.u), cut(run.y), cut(run.ts)
+            ax[0].plot(u, y, "k", lw=0.8, label="measured")
+            ax[0].plot(u, cut(p0), "C0", lw=0.8, label="base")
+            ax[0].plot(u, cut(p1), "C3", lw=0.8, ls="--", label="base + effects")
             ax[0].set_xlabel("input")
             ax[0].set_ylabel("output")
-            ax[0].set_title(f"{run.run_id} ({run.role})", fontsize=9)
+            parts = run.run_id.split("+")
+            name = parts[0] if len(parts) == 1 else f"{len(parts)} records ({parts[0]}, ...)"
+            ax[0].set_title(f"{name} ({run.role})", fontsize=9)
             ax[0].legend(fontsize=7)
-            ax[1].plot(run.ts, run.y - p0, "C0", lw=0.7, label="residual, base")
-            ax[1].plot(run.ts, run.y - p1, "C3", lw=0.7, label="residual, base + effects")
+            ax[1].plot(ts, y - cut(p0), "C0", lw=0.7, label="residual, base")
+            ax[1].plot(ts, y - cut(p1), "C3", lw=0.7, label="residual, base + effects")
             for s in segs:
                 if s["run_id"] == run.run_id:
                     ax[1].axvspan(s["t_start_s"], s["t_end_s"], color="orange", alpha=0.2)
@@ -205,7 +223,8 @@ def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
             ax[1].legend(fontsize=7)
         names = [e["name"] for e in report["effects"]] or ["no missing effect"]
         fig.suptitle(f"{report['base_family']} + {', '.join(names)} | {g.key}", fontsize=10)
-        fig.tight_layout()
+        # Keep a 0.4 inch strip for the suptitle whatever the number of rows.
+        fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - 0.4 / fig.get_figheight()))
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in g.key)
         path = out_dir / f"discrepancy_{safe}.png"
         with atomic_path(path, suffix=".png") as tmp:
