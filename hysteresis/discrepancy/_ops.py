@@ -34,6 +34,29 @@ def play(u: FloatArray, r: float, *, z0: float | None = None) -> FloatArray:
     return np.asarray(_play(uu, float(r), start), dtype=np.float64)
 
 
+@njit(cache=True)
+def _scaled_play(u: Any, h: Any, z0: float) -> Any:  # pragma: no cover - compiled
+    out = np.empty_like(u)
+    z = z0
+    for k in range(u.size):
+        if u[k] - h[k] > z:
+            z = u[k] - h[k]
+        elif u[k] + h[k] < z:
+            z = u[k] + h[k]
+        out[k] = z
+    return out
+
+
+def scaled_play(u: FloatArray, half_width: FloatArray, *, z0: float) -> FloatArray:
+    """Play operator whose half-width varies in time (>= 0): it widens without moving the
+    output (the operator holds) and pulls the output along when it narrows."""
+    uu = np.ascontiguousarray(u, dtype=np.float64)
+    hh = np.ascontiguousarray(half_width, dtype=np.float64)
+    if hh.shape != uu.shape or np.any(hh < 0):
+        raise ValueError("half_width must be >= 0 and as long as u")
+    return np.asarray(_scaled_play(uu, hh, float(z0)), dtype=np.float64)
+
+
 def smooth(x: FloatArray, window: int) -> FloatArray:
     """Centred moving average with edge replication (window forced odd, >= 1)."""
     w = max(1, int(window)) | 1

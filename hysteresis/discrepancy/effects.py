@@ -23,7 +23,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from hysteresis.base import HysteresisError, HysteresisModel
-from hysteresis.discrepancy._ops import FloatArray, play, shift
+from hysteresis.discrepancy._ops import FloatArray, play, scaled_play, shift, velocity
 from hysteresis.discrepancy.runs import RunData
 
 EFFECT_NAMES = (
@@ -75,6 +75,21 @@ class Effect:
     ) -> FloatArray:
         return np.empty((run.n, 0))
 
+    def pinned(self, theta: Any) -> bool:
+        """Does ``theta`` sit at the end of the term's physically plausible range?"""
+        return False
+
+    #: Acts on a Gamma base's play operators (their widths scaled by :meth:`scale`) instead of
+    #: transforming the input; with any other base the input-side form is used.
+    operator: bool = False
+
+    def operator_grid(self, ident: RunData) -> list[Any]:
+        return self.grid(ident)
+
+    def scale(self, run: RunData, theta: Any) -> FloatArray:
+        """Factor on every play operator's width (operator form only)."""
+        return np.ones(run.n)
+
     def describe(self) -> dict[str, str]:
         return {"signature": self.signature, "term": self.term, "side": self.side}
 
@@ -86,10 +101,15 @@ class RateDependence(Effect):
         "scale; residual opposes the motion while the tendon slides, larger on faster runs, "
         "nearly absent on slow ones"
     )
-    term = ("y = base(u - c tanh(v / v0)): the input as the sheath friction feels it lags by a "
-            "speed-dependent amount (c, v0 on a grid, c refined); the base's own stick/slip keeps "
-            "the term silent while the tendon sticks")
+    term = ("play-operator bases (Gamma): every play's half-width scales with the friction's "
+            "speed law, r_i (1 + g tanh(|v| / v0)), so a play widens only while it slides and "
+            "relaxes when the speed drops (g, v0 on a grid, g refined; weights refitted exactly); "
+            "other bases: y = base(u - c tanh(v / v0)), the input lagging by a speed-dependent "
+            "amount (c, v0 on a grid, c refined)")
     side = "input"
+    operator = True
+    #: Largest loop widening the speed-scaled plays may fit (friction at most doubling).
+    g_max = 1.0
     has_theta = True
     n_theta = 2
 
@@ -99,9 +119,32 @@ class RateDependence(Effect):
         return [(f * vmax, c * span) for f in (0.3, 0.8, 3.0)
                 for c in (0.003, 0.01, 0.025, 0.05, 0.08)]
 
+    def operator_grid(self, ident: RunData) -> list[Any]:
+        """(1, v0, g) for the speed-scaled play operators (the leading 1 tags the form; g, the
+        last component, is refined)."""
+        vmax = float(np.percentile(np.abs(speed(ident)), 99))
+        return [(1.0, f * vmax, g) for f in (0.3, 0.5, 0.8, 1.2)
+                for g in (0.15, 0.3, 0.6, self.g_max)]
+
     def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx) -> FloatArray:
         v0, c = theta
         return np.asarray(u - c * np.tanh(run.v / v0), dtype=np.float64)
+
+    def pinned(self, theta: Any) -> bool:
+        # Only the speed-scaled plays (theta = (1, v0, g)) carry a friction gain; a gain at the
+        # top of its range asks for widening without bound, which is a latency, not friction.
+        return len(theta) == 3 and float(theta[2]) >= 0.98 * self.g_max
+
+    def scale(self, run: RunData, theta: Any) -> FloatArray:
+        """Friction factor 1 + g tanh(|v| / v0) of the speed-scaled play operators."""
+        _, v0, g = theta
+        return np.asarray(1.0 + g * np.tanh(np.abs(speed(run)) / v0), dtype=np.float64)
+
+
+def speed(run: RunData) -> FloatArray:
+    """Input speed for the friction law: the decimation's moving average already smooths the
+    servo's 10 ms set-point steps, so only one sample of extra smoothing (a short window)."""
+    return velocity(run.t, run.u, window_s=0.5 * run.dt)
 
 
 class TendonElongation(Effect):
@@ -310,13 +353,71 @@ class ComposedModel:
         self.terms = tuple(terms)
         self.iterations = iterations
         self.tol = tol
+        self._gamma: bool | None = None
 
     def _input(self, run: RunData) -> FloatArray:
         u = run.u
         for term in self.terms:
-            if term.effect.side == "input":
+            if term.effect.side == "input" and not self._on_operators(term):
                 u = term.effect.transform_input(run, u, term.theta, term.context)
         return u
+
+    def _on_operators(self, term: Term) -> bool:
+        """Does ``term`` act on the base's play operators (a Gamma base) instead of its input?"""
+        if not term.effect.operator:
+            return False
+        if self._gamma is None:
+            self._gamma = is_gamma(self.base_factory())
+        return self._gamma
+
+    def _scaled_design(self, run: RunData, base: HysteresisModel) -> FloatArray:
+        """The Gamma base's play-operator columns with time-varying thresholds.
+
+        Column i is ``w_i = play_{p_i f(t) / 2}(u) - p_i / 2``: with ``f = 1`` exactly the Gamma
+        operator ``min(u, max(u - p_i, w))`` from the zero state; ``f`` is the product of the
+        operator terms' friction factors.
+        """
+        u = self._input(run)
+        f = np.ones(run.n)
+        for term in self.terms:
+            if self._on_operators(term):
+                f = f * term.effect.scale(run, term.theta)
+        p = _gamma_thresholds(base)
+        u0 = float(u[0])
+        cols = []
+        for pi in p:
+            w0 = min(u0, max(u0 - float(pi), 0.0))
+            cols.append(scaled_play(u, 0.5 * float(pi) * f, z0=w0 + 0.5 * float(pi))
+                        - 0.5 * float(pi))
+        a = np.column_stack(cols)
+        if getattr(base, "fit_offset", False):
+            a = np.column_stack([a, np.ones(run.n)])
+        return a
+
+    def _fit_operators(self, run: RunData) -> ComposedModel:
+        """Exact (constrained) least squares of the speed-scaled Gamma and the features."""
+        from hysteresis.gamma import constrained_lstsq
+
+        base = self.base_factory()
+        a = self._scaled_design(run, base)
+        n_w = int(_gamma_thresholds(base).size)
+        uses_base = any(t.effect.uses_base for t in self.terms if t.effect.n_linear > 0)
+        yb = run.y
+        x = np.zeros(a.shape[1])
+        for _ in range(self.iterations if uses_base else 1):
+            phi = self._features(run, yb)
+            full = np.column_stack([a, phi])
+            if getattr(base, "constraint", "free") == "sum_to_one":
+                c = np.zeros(full.shape[1])
+                c[:n_w] = 1.0
+                x, _ = constrained_lstsq(full, run.y, c, 1.0)
+            else:
+                x = _lstsq(full, run.y)
+            yb = a @ x[: a.shape[1]]
+        self.base_ = base
+        self.op_weights_ = np.asarray(x[: a.shape[1]], dtype=np.float64)
+        self.coef_ = np.asarray(x[a.shape[1]:], dtype=np.float64)
+        return self
 
     def _features(self, run: RunData, y_base: FloatArray) -> FloatArray:
         cols = [t.effect.features(run, t.theta, y_base, t.context)
@@ -324,6 +425,8 @@ class ComposedModel:
         return np.hstack(cols) if cols else np.empty((run.n, 0))
 
     def fit(self, run: RunData) -> ComposedModel:
+        if any(self._on_operators(t) for t in self.terms):
+            return self._fit_operators(run)
         u = self._input(run)
         y = run.y
         out_terms = [t for t in self.terms if t.effect.n_linear > 0]
@@ -360,6 +463,11 @@ class ComposedModel:
     def predict(self, run: RunData) -> FloatArray:
         if not hasattr(self, "base_"):
             raise HysteresisError("ComposedModel is not fitted yet; call fit(run) first")
+        if hasattr(self, "op_weights_"):
+            yo = self._scaled_design(run, self.base_) @ self.op_weights_
+            if self.coef_.size:
+                yo = yo + self._features(run, yo) @ self.coef_
+            return np.asarray(yo, dtype=np.float64)
         u = self._input(run)
         yb = self.base_.predict(u)
         if self.coef_.size:
@@ -369,6 +477,19 @@ class ComposedModel:
     @property
     def n_params(self) -> int:
         return sum(t.effect.n_params for t in self.terms)
+
+
+def _gamma_thresholds(base: HysteresisModel) -> FloatArray:
+    """The (unfitted) Gamma base's play thresholds."""
+    thresholds = getattr(base, "_thresholds", None)
+    if thresholds is None:
+        raise HysteresisError(f"{type(base).__name__} has no play-operator thresholds")
+    return np.asarray(thresholds(), dtype=np.float64)
+
+
+def is_gamma(base: HysteresisModel) -> bool:
+    """A Gamma-family base (play-operator design matrix, exact least-squares fit)?"""
+    return getattr(base, "family", "") == "gamma" and hasattr(base, "_thresholds")
 
 
 def _joint_linear(base: HysteresisModel, u: FloatArray, y: FloatArray,
@@ -425,6 +546,8 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
         return m.fit(ident)
 
     grid = effect.grid(ident)
+    if effect.operator and is_gamma(base_factory()):
+        grid = effect.operator_grid(ident)
     fits = [build(th) for th in grid]
     sses = [_sse(m, ident) for m in fits]
     best = int(np.argmin(sses))

@@ -169,6 +169,9 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
         "n_params": k,
         "runs_improved": improved,
         "residual_explained": explained,
+        # A physical parameter that runs to the end of its plausible range in every
+        # configuration: the hypothesis is being stretched to mimic another effect.
+        "pinned_at_bound": all(effect.pinned(models[g.key].terms[-1].theta) for g in groups),
         "heldout_per_run": {rid: {"before": r0[rid], "after": r1[rid]} for rid in r0},
         "parameters": params,
     }
@@ -176,7 +179,7 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
 
 def _accept(s: dict[str, Any], st: WorkflowSettings) -> bool:
     return bool(s["relative_gain"] >= st.min_relative_gain and s["delta_bic"] <= st.max_delta_bic
-                and s["runs_improved"] >= st.min_runs_improved)
+                and s["runs_improved"] >= st.min_runs_improved and not s["pinned_at_bound"])
 
 
 def _compact_locate(loc: dict[str, Any]) -> dict[str, Any]:
@@ -359,7 +362,8 @@ def _reach_note(within: list[str], base_name: str) -> str:
 
 def _public(s: dict[str, Any]) -> dict[str, Any]:
     keys = ("name", "relative_gain", "delta_bic", "rmse_before", "rmse_after",
-            "heldout_rmse_before", "heldout_rmse_after", "runs_improved", "residual_explained")
+            "heldout_rmse_before", "heldout_rmse_after", "runs_improved", "residual_explained",
+            "pinned_at_bound")
     return {k: s[k] for k in keys}
 
 

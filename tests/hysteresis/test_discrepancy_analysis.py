@@ -12,7 +12,7 @@ import pytest
 
 import hysteresis.discrepancy.locate as L
 from hysteresis.base import HysteresisError, make_family
-from hysteresis.discrepancy._ops import play, shift
+from hysteresis.discrepancy._ops import play, scaled_play, shift
 from hysteresis.discrepancy.bases import AffineModel, PlaySumModel
 from hysteresis.discrepancy.effects import (
     CANDIDATES,
@@ -223,6 +223,49 @@ def test_rate_dependence_term_recovers_a_speed_dependent_lag():
     base = ComposedModel(lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))).fit(r)
     e0 = np.sqrt(np.mean((r.y - base.predict(r)) ** 2))
     assert np.sqrt(np.mean((r.y - m.predict(r)) ** 2)) < 0.2 * e0
+
+
+def test_scaled_play_holds_when_widening_and_pulls_when_narrowing():
+    u = np.array([0.0, 1.0, 2.0, 2.0, 2.0])
+    # constant width: the ordinary play operator
+    assert np.allclose(scaled_play(u, np.full(5, 0.5), z0=0.0), play(u, 0.5, z0=0.0))
+    # widened while sliding (output lags by 1.0), then the width shrinks at rest: the output
+    # is pulled along to u - 0.5 (friction relaxing as the speed drops)
+    z = scaled_play(u, np.array([1.0, 1.0, 1.0, 0.5, 0.5]), z0=0.0)
+    assert np.allclose(z, [0.0, 0.0, 1.0, 1.5, 1.5])
+    with pytest.raises(ValueError, match="half_width"):
+        scaled_play(u, -np.ones(5), z0=0.0)
+
+
+def test_rate_dependence_scales_a_gamma_bases_play_operators():
+    # A Gamma plant whose plays widen with speed by 1 + 0.6 tanh(|v| / v0): the term (acting on
+    # the Gamma base's operators, weights refitted exactly) recovers g and the plant; g = 0
+    # is the plain Gamma.
+    t, u = sine_decay()
+    probe = RunData(run_id="p", t=t, u=u, y=u)
+    eff = candidate("rate_dependence")
+    gamma = lambda: make_family("gamma", thresholds=[0.0, 0.6, 2.0])  # noqa: E731
+    grid = eff.operator_grid(probe)
+    v0 = grid[5][1]
+    zero = ComposedModel(gamma, [Term(eff, (1.0, v0, 0.0))])
+    w = np.array([0.5, 0.3, 0.2])
+    g0 = gamma().fit(u, u)
+    g0.weights_ = w
+    y0 = g0.predict(u)
+    assert np.allclose(zero.fit(RunData(run_id="z", t=t, u=u, y=y0)).predict(
+        RunData(run_id="z", t=t, u=u, y=y0)), y0, atol=1e-9)
+    true = ComposedModel(gamma, [Term(eff, (1.0, v0, 0.6))])
+    true.base_ = gamma()
+    true.op_weights_ = w
+    true.coef_ = np.zeros(0)
+    r = RunData(run_id="rate", t=t, u=u, y=true.predict(RunData(run_id="x", t=t, u=u, y=u)))
+    m = fit_with_effect(gamma, [], eff, r)
+    assert m.terms[0].theta[1] == pytest.approx(v0)
+    assert m.terms[0].theta[2] == pytest.approx(0.6, rel=0.05)
+    assert np.sqrt(np.mean((r.y - m.predict(r)) ** 2)) < 0.01 * np.std(r.y)
+    clean = ComposedModel(gamma).fit(r)
+    assert np.sqrt(np.mean((r.y - clean.predict(r)) ** 2)) > 0.05
+    assert not eff.pinned(m.terms[0].theta) and eff.pinned((1.0, v0, eff.g_max))
 
 
 def test_composed_model_stacks_terms_and_refits_jointly():

@@ -9,9 +9,9 @@ Strengths: 1 = the rig's nominal size (docs/virtual-rig.md). Where the nominal s
 than the base family's own structural error on clean runs (the rig's friction texture leaves
 ~0.063 mm RMSE that no family removes), a larger strength is used so that halving the held-out
 RMSE is possible at all: 2 for drift, asymmetry and dead_zone, 8 for tendon_elongation (a
-polymer tendon). rate_dependence (1) is named first but stays near -33 %: the friction texture
-is multiplied by the same speed factor, which raises the floor of those runs (see
-docs/discrepancy.md).
+polymer tendon), 1.5 for rate_dependence (+81 % friction at 6 mm/s; at strength 1 it is named
+first but stays near -35 %: the friction texture is multiplied by the same speed factor, which
+raises the floor of those runs, see docs/discrepancy.md).
 """
 
 from __future__ import annotations
@@ -96,19 +96,33 @@ def test_hidden_effect_is_named_first_and_halves_the_heldout_error(effect, stren
     assert e["evidence"]["runs_improved"] == 1.0
 
 
-def test_rate_dependence_is_named_first_and_reaches_the_rigs_error_floor():
-    # Named first, ahead of tendon_elongation (whose tension columns also see the wider
-    # loops), but the held-out reduction stays near a third: the rig's friction texture is
-    # multiplied by the same speed factor, so the error floor of the rate runs is ~0.085 mm
-    # against 0.063 mm on clean runs (docs/discrepancy.md: with the texture switched off the
-    # same term removes about half).
+def test_rate_dependence_is_named_first_and_halves_the_heldout_error():
+    # Strength 1.5 = friction x (1 + 1.5 tanh(|v| / 10 mm/s)): +81 % at the held-out runs'
+    # 6 mm/s. The term scales the Gamma base's play widths by the speed law; it is named ahead
+    # of time_delay (a latency also looks like a wider loop at one speed) and removes half.
+    rep = report({"rate_dependence": 1.5})
+    e = first(rep)
+    assert e["name"] == "rate_dependence"
+    assert e["evidence"]["runner_up"]["name"] == "time_delay"
+    assert reduction(e) >= 0.5, reduction(e)
+    assert e["evidence"]["runs_improved"] == 1.0
+    # the speed law fitted per configuration is physical: a gain inside its range, and the
+    # same speed scale in both configurations (one sheath material)
+    thetas = [p["theta"] for p in e["evidence"]["parameters"].values()]
+    assert all(0.2 < g < 1.0 for _, _, g in thetas)
+    assert thetas[0][1] == pytest.approx(thetas[1][1], rel=0.01)
+
+
+def test_nominal_rate_dependence_is_named_first_down_to_the_rigs_error_floor():
+    # At strength 1 (+54 % at 6 mm/s) the term is named first but removes about a third: the
+    # rig multiplies its friction texture by the same speed factor, which raises the floor of
+    # these runs above the clean 0.063 mm (docs/discrepancy.md).
     rep = report({"rate_dependence": 1.0})
     e = first(rep)
     assert e["name"] == "rate_dependence"
     assert e["evidence"]["runner_up"]["name"] == "tendon_elongation"
-    assert reduction(e) >= 0.3, reduction(e)
-    assert e["heldout_rmse_after"] < 0.095
-    assert e["evidence"]["runs_improved"] == 1.0
+    assert reduction(e) >= 0.33, reduction(e)
+    assert e["heldout_rmse_after"] < 0.085
 
 
 def test_dead_zone_is_within_reach_of_play_operators_with_an_offset():
