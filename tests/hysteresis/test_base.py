@@ -96,29 +96,10 @@ def test_score_is_r2() -> None:
     assert 0.9 < lin.score(U, Y) < 1.0
 
 
-def _virtual_pair(curve: float, radius: float) -> tuple[np.ndarray, ...]:
-    """Sine-decay (identification) and triangle (validation) runs of the virtual rig, in mm."""
-    from rig_io.calibrate import calibrate_raw_run
-    from rig_io.virtual import simulate_run
-
-    amps = [6.0, 4.5, 3.0, 1.5]
-    exc = [
-        {"kind": "sine_decay", "amplitudes_mm": amps, "periods_per_amplitude": 5,
-         "frequency_hz": 0.25},
-        {"kind": "triangle_decay", "amplitudes_mm": amps, "periods_per_amplitude": 3,
-         "slope_mm_s": 6.0},
-    ]
-    out = []
-    for seed, e in enumerate(exc, start=1):
-        enc = calibrate_raw_run(simulate_run(curve_angle_deg=curve, radius_mm=radius,
-                                             excitation=e, seed=seed)).encoder
-        out += [enc["input"].to_numpy(), enc["output"].to_numpy()]
-    return tuple(out)
-
-
-def test_families_fit_virtual_rig_sine_and_predict_its_triangle() -> None:
+def test_families_fit_virtual_rig_sine_and_predict_its_triangle(
+        virtual_pair_90_30: tuple[np.ndarray, ...]) -> None:
     """Seed 001 4.5: identify on the sine run, validate on the triangle run (90 deg, 30 mm)."""
-    u, y, ut, yt = _virtual_pair(90.0, 30.0)
+    u, y, ut, yt = virtual_pair_90_30
     assert u.size == 8001
     rmse = {}
     for name in ("linear", "gamma", "preisach"):
