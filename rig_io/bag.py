@@ -14,9 +14,7 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import struct
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
@@ -34,6 +32,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from rig_io import checks
+from rig_io.atomic import atomic_path
 from rig_io.calibrate import (
     PhysicalRun,
     calibrate_raw_run,
@@ -79,26 +78,13 @@ def write_bag(run: RawRun, path: str | os.PathLike[str], *, storage: Storage = "
     if storage not in ("rosbag1", "sqlite3", "mcap"):
         raise RigIOError(f"unknown bag storage {storage!r}", run=run.run_id, file=str(target))
     phys = calibrate_raw_run(run)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmpdir = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
-    try:
-        inner = tmpdir / target.name
+    # keep_name: a rosbag2 writer names its storage file after the folder it writes.
+    with atomic_path(target, keep_name=True) as inner:
         if storage == "rosbag1":
             _write_ros1(phys, inner, compress=compress)
         else:
             plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
             _write_ros2(phys, inner, plugin=plugin)
-        if target.is_dir():
-            old = target.with_name(f".{target.name}.old")
-            if old.exists():
-                shutil.rmtree(old)
-            os.replace(target, old)
-            os.replace(inner, target)
-            shutil.rmtree(old)
-        else:
-            os.replace(inner, target)
-    finally:
-        shutil.rmtree(tmpdir, ignore_errors=True)
     return target
 
 
