@@ -185,6 +185,29 @@ class HysteresisModel:
         return cls.from_dict(json.loads(text))
 
 
+class StatefulModel(HysteresisModel):
+    """A family whose ``predict`` can also return its final state (``return_state=True``).
+
+    It gets the state-carrying API that compensation loops use for free: ``simulate`` (a
+    record, continuing from ``state``) and ``step`` (one sample). Families with a cheaper
+    one-sample update override ``step``.
+    """
+
+    def predict(self, u: Any, *, state: Any = None,
+                return_state: bool = False) -> Any:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, Any]:
+        """``(y, final_state)``: :meth:`predict` with the state returned."""
+        y, st = self.predict(u, state=state, return_state=True)
+        return y, st
+
+    def step(self, u_k: float, state: Any = None) -> tuple[float, Any]:
+        """One forward step: ``(y_k, state_k)`` from ``u_k`` and ``state_{k-1}`` (not modified)."""
+        y, st = self.predict(np.array([float(u_k)]), state=state, return_state=True)
+        return float(y[0]), st
+
+
 def _encode(obj: Any) -> Any:
     """JSON-able form that round-trips numpy arrays (dtype and shape) exactly."""
     if isinstance(obj, np.ndarray):

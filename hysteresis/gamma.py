@@ -31,7 +31,7 @@ from threadpoolctl import threadpool_limits
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
-    HysteresisModel,
+    StatefulModel,
     as_1d,
     check_pair,
     register_family,
@@ -61,7 +61,7 @@ class GammaState:
 
 
 @register_family("gamma")
-class GammaModel(HysteresisModel):
+class GammaModel(StatefulModel):
     """Weighted sum of discrete play operators (Prandtl-Ishlinskii type, seed 001 Gamma_n).
 
     Parameters
@@ -195,11 +195,6 @@ class GammaModel(HysteresisModel):
         if return_state:
             return y, GammaState(w, float(uu[-1]))
         return y
-
-    def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, GammaState]:
-        """``(y, final_state)``: :meth:`predict` with the state returned."""
-        y, st = self.predict(u, state=state, return_state=True)
-        return y, st
 
     def step(self, u_k: float, state: Any = None) -> tuple[float, GammaState]:
         """One forward step: ``(y_k, state_k)`` from ``u_k`` and ``state_{k-1}`` (not modified)."""

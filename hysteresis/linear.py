@@ -10,7 +10,7 @@ import numpy as np
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
-    HysteresisModel,
+    StatefulModel,
     as_1d,
     check_pair,
     register_family,
@@ -28,7 +28,7 @@ class LinearState:
 
 
 @register_family("linear")
-class LinearModel(HysteresisModel):
+class LinearModel(StatefulModel):
     """Gain, offset and an optional pure delay in samples.
 
     Parameters
@@ -102,15 +102,6 @@ class LinearModel(HysteresisModel):
         if return_state:
             return y, LinearState(full[full.size - self.delay_ :].copy())
         return y
-
-    def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, LinearState]:
-        y, st = self.predict(u, state=state, return_state=True)
-        return y, st
-
-    def step(self, u_k: float, state: Any = None) -> tuple[float, LinearState]:
-        """One forward step: ``(y_k, state_k)``."""
-        y, st = self.predict(np.array([float(u_k)]), state=state, return_state=True)
-        return float(y[0]), st
 
     def invert(self, y_desired: Any, *, state: Any = None, return_state: bool = False) -> Any:
         """``u(k) = (y(k + delay) - offset) / gain``; the last ``delay`` inputs hold the last value.

@@ -43,7 +43,7 @@ from threadpoolctl import threadpool_limits
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
-    HysteresisModel,
+    StatefulModel,
     as_1d,
     check_pair,
     register_family,
@@ -100,7 +100,7 @@ def density_shape(
 
 
 @register_family("preisach")
-class PreisachModel(HysteresisModel):
+class PreisachModel(StatefulModel):
     """Relay hysterons on a discretised Preisach plane with a parametric or free density.
 
     Parameters
@@ -332,15 +332,6 @@ class PreisachModel(HysteresisModel):
         if return_state:
             return y, PreisachState(r, float(uu[-1]))
         return y
-
-    def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, PreisachState]:
-        y, st = self.predict(u, state=state, return_state=True)
-        return y, st
-
-    def step(self, u_k: float, state: Any = None) -> tuple[float, PreisachState]:
-        """One forward step: ``(y_k, state_k)`` from ``u_k`` and ``state_{k-1}`` (not modified)."""
-        y, st = self.predict(np.array([float(u_k)]), state=state, return_state=True)
-        return float(y[0]), st
 
     # -- inverse ----------------------------------------------------------------------
     def _input_bounds(self) -> tuple[float, float]:
