@@ -61,6 +61,10 @@ class TSMParams:
     #: Friction varies with the sliding distance (strand lay of the 7x19 cable, coil pitch):
     #: relative RMS of the modulation, and the wavelength range of its components (mm).
     friction_texture: float = 0.12
+    #: Frictional memory of the sheath contact (s): the speed-dependent part of the friction
+    #: follows the sliding speed through this lag (friction lags velocity changes in
+    #: lubricated contacts, Hess & Soom 1990), not the carriage's lurches inside a servo tick.
+    friction_memory_s: float = 0.02
     texture_wavelength_mm: tuple[float, float] = (0.7, 4.0)
     #: Vibration of the follower carriage (RMS mm, correlation time s): the rig's noise floor.
     follower_vibration_mm: float = 0.04
@@ -179,6 +183,7 @@ def build_chain(*, rig: str, curve_angle_deg: float, radius_mm: float, params: T
     p[ph.P_ASYM] = effects.asymmetry_fraction()
     p[ph.P_RATE] = effects.rate_gain()
     p[ph.P_V0] = effects.rate_v0_mm_s()
+    p[ph.P_TF] = params.friction_memory_s
     p[ph.P_PLAY] = effects.dead_zone_mm()
     p[ph.P_TAU] = params.servo_tau_s
     p[ph.P_VMAX] = params.servo_vmax_mm_s

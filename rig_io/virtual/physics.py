@@ -48,7 +48,7 @@ P_TREF = 4  # reference tension of the stretch (the pretension), N
 P_TC = 5  # tension scale of the clearance lost motion, N
 P_STOP = 6  # follower stop on the pull side (end of stroke), mm (inf = none)
 P_ASYM = 7  # asymmetry: mu_pull = mu (1 + a), mu_release = mu (1 - a)
-P_RATE = 8  # rate dependence gain: mu (1 + g tanh(|v| / v0))
+P_RATE = 8  # rate dependence gain: mu (texture + g tanh(|v_f| / v0))
 P_V0 = 9  # rate dependence velocity scale, mm/s
 P_PLAY = 10  # actuator-side backlash (full width), mm
 P_TAU = 11  # servo time constant, s
@@ -57,7 +57,8 @@ P_DT = 13  # physics tick, s
 P_FS = 14  # follower guide breakaway (static) friction, N
 P_TS = 15  # tension scale of the coil sheath's stiffening (gaps closing), N
 P_STOP_LO = 16  # follower stop on the release side, mm (-inf = none)
-N_P = 17
+P_TF = 17  # frictional memory: time constant of the speed the rate dependence follows, s
+N_P = 18
 
 _EPS_T = 1e-12  # N: tolerance of the stick/slip comparisons
 _TOL_X = 1e-8  # mm: tolerance of the position solve (encoder: 1e-4 mm)
@@ -301,12 +302,18 @@ def run_ticks(commands: FloatArray, n_sub: int, state: FloatArray, tens: FloatAr
     """Advance the rig through ``len(commands)`` control ticks of ``n_sub`` physics ticks.
 
     ``state`` = [carriage position, carriage velocity, tendon-end position, follower position,
-    follower sliding direction] (mm, mm/s, -1/0/+1). ``rec`` has shape
-    ``(len(commands) * n_sub, 4)`` and receives, after every physics tick: carriage position,
-    follower position, input tension, output tension.
+    follower sliding direction, remembered sliding speed] (mm, mm/s, mm, mm, -1/0/+1, mm/s).
+    ``rec`` has shape ``(len(commands) * n_sub, 4)`` and receives, after every physics tick:
+    carriage position, follower position, input tension, output tension.
     The command of a tick is the servo set-point held during it (the 10 ms loop).
     ``texture`` rows ``(amplitude, wavenumber rad/mm, phase)`` modulate the friction with the
     sliding distance (strand lay and coil pitch): ``mu (1 + sum a sin(k x + psi))``.
+    The rate dependence adds a velocity-strengthening part ``mu g tanh(|v_f| / v0)`` (Coulomb
+    plus a viscous-like term, as Stribeck-type laws add them; the texture of the contact does
+    not modulate the lubricant's shear). ``v_f`` is the tendon's sliding speed seen through the
+    contact's frictional memory, a first-order lag ``P_TF``: friction does not follow the
+    speed's swings inside one servo tick (a 10 ms set-point step makes the carriage lurch from
+    ~2x to ~0.4x its mean speed), it follows the speed the contact has been sliding at.
     """
     dt = p[P_DT]
     alpha = 1.0 - math.exp(-dt / p[P_TAU]) if p[P_TAU] > 0.0 else 1.0
@@ -316,6 +323,7 @@ def run_ticks(commands: FloatArray, n_sub: int, state: FloatArray, tens: FloatAr
     asym = p[P_ASYM]
     gain = p[P_RATE]
     v0 = p[P_V0]
+    beta = 1.0 - math.exp(-dt / p[P_TF]) if p[P_TF] > 0.0 else 1.0
     m = tens.shape[0]
     k = 0
     for c in range(commands.shape[0]):
@@ -338,12 +346,14 @@ def run_ticks(commands: FloatArray, n_sub: int, state: FloatArray, tens: FloatAr
                 xt = xm_new - half_play
             elif xt - xm_new > half_play:
                 xt = xm_new + half_play
+            v_slide = abs(xt - state[2]) / dt
             state[2] = xt
-            scale = 1.0 + gain * math.tanh(abs(v) / v0) if gain != 0.0 else 1.0
-            tex = 1.0
+            state[5] += beta * (v_slide - state[5])
+            scale = 1.0
             for q in range(texture.shape[0]):
-                tex += texture[q, 0] * math.sin(texture[q, 1] * xt + texture[q, 2])
-            scale *= tex
+                scale += texture[q, 0] * math.sin(texture[q, 1] * xt + texture[q, 2])
+            if gain != 0.0:
+                scale += gain * math.tanh(state[5] / v0)
             mu_p = mu0 * (1.0 + asym) * scale
             mu_r = mu0 * (1.0 - asym) * scale
             state[3] = advance(xt, state[3], mu_p, mu_r, tens, sv, work, wsv, theta, cont, coef,

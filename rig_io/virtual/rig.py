@@ -126,7 +126,7 @@ class _Core:
         self.sv = self.sv0.copy()
         self.work = np.zeros_like(self.tens)
         self.wsv = np.zeros_like(self.tens)
-        self.state = np.array([0.0, 0.0, 0.0, self.u_out0, 0.0])
+        self.state = np.array([0.0, 0.0, 0.0, self.u_out0, 0.0, 0.0])
         self.ticks = 0
 
     def command_to_mm(self, command: FloatArray) -> FloatArray:

@@ -116,6 +116,28 @@ def test_rate_dependence_widens_loops_with_speed_only() -> None:
     assert fast1 / fast0 > slow1 / slow0
 
 
+def test_rate_dependent_friction_follows_the_sliding_speed_not_the_servo_lurches() -> None:
+    # A 10 ms set-point step makes the carriage lurch (fast, then nearly still) inside every
+    # tick. Friction follows the speed through the contact's memory (friction_memory_s), so a
+    # 6 mm/s slide reads the nominal law 1 + tanh(6 / 10) = 1.54 x the rate-free friction in
+    # the load cells (ln(T_in / T_out) = mu x turning while the tendon slides). Without the
+    # memory the friction relaxes to the nearly-still end of every tick and reads much less.
+    ramp = {"kind": "ramp", "velocity_mm_s": 6.0, "stroke_mm": 6.0}
+
+    def reading(effects: dict[str, float] | None, memory: float = 0.02) -> float:
+        fine = simulate_run(curve_angle_deg=90, radius_mm=30, excitation=ramp, seed=3,
+                            effects=effects, params={"friction_memory_s": memory,
+                                                     "friction_texture": 0.0}
+                            ).extras["truth_fine"]
+        t, x = fine["t_s"].to_numpy(), fine["input_mm"].to_numpy()
+        ratio = np.log(fine["tension_in_n"].to_numpy() / fine["tension_out_n"].to_numpy())
+        return float(np.mean(ratio[(t > 0.6) & (x > 2.0) & (x < 5.0)]))
+
+    free = reading(None)
+    assert reading({"rate_dependence": 1.0}) / free == pytest.approx(1 + np.tanh(0.6), rel=0.03)
+    assert reading({"rate_dependence": 1.0}, memory=0.0) / free < 1.4
+
+
 def test_tendon_elongation_adds_load_dependent_lag_at_unchanged_tension() -> None:
     base, eff = truth(), truth("tendon_elongation")
     # Tension is set by friction and the follower spring, not by the tendon's compliance.
