@@ -17,7 +17,7 @@ RUNS ?= data/raw/virtual
 REPORT ?= data/reports/discrepancy.json
 
 .PHONY: help venv data generate ingest fit validate report pipeline test bench ui \
-        compensate discrepancy lint typecheck clean clean-data
+        compensate discrepancy discrepancy-study lint typecheck clean clean-data
 
 help:
 	@echo "make pipeline    generate -> ingest -> fit -> validate -> report (virtual rig, local MLflow)"
@@ -28,6 +28,7 @@ help:
 	@echo "make ui          MLflow UI on http://127.0.0.1:5000"
 	@echo "make compensate  compensation experiments"
 	@echo "make discrepancy RUNS=<dir> REPORT=<file.json>"
+	@echo "make discrepancy-study  detection limits of the discrepancy workflow (~4 min)"
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(PY) || $(PYTHON_BOOT) -m venv $(VENV)
@@ -71,6 +72,9 @@ compensate: $(STAMP)
 
 discrepancy: $(STAMP)
 	$(PY) -m pipelines.discrepancy source=$(RUNS) report=$(REPORT) $(ARGS)
+
+discrepancy-study: $(STAMP)
+	$(PY) -m pipelines.discrepancy_study $(ARGS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check hysteresis rig_io pipelines tests bench

@@ -14,22 +14,9 @@ from unittest import mock
 
 
 def _runs() -> list[Any]:
-    from pipelines.discrepancy import rows_from_raw, runs_from_dataset
-    from rig_io.virtual import simulate_run
+    from pipelines.discrepancy_study import hidden_effect_runs
 
-    amps = [6.0, 4.5, 3.0, 1.5]
-    exc = [
-        {"kind": "sine_decay", "amplitudes_mm": amps, "periods_per_amplitude": 3,
-         "frequency_hz": 0.25},
-        {"kind": "triangle_decay", "amplitudes_mm": amps, "periods_per_amplitude": 3,
-         "slope_mm_s": 6.0},
-        {"kind": "trapezoid_decay", "amplitudes_mm": amps, "periods_per_amplitude": 3,
-         "slope_mm_s": 6.0, "dwell_s": 1.0},
-    ]
-    raws = [simulate_run(curve_angle_deg=90.0, radius_mm=30.0, excitation=e,
-                         effects={"time_delay": 1.0, "drift": 2.0}, seed=3) for e in exc]
-    rows, meta = rows_from_raw(raws)
-    return runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=20.0)
+    return hidden_effect_runs({"time_delay": 1.0, "drift": 2.0}, [(90.0, 30.0)])
 
 
 def _time(fn: Any, repeat: int = 2) -> tuple[float, Any]:

@@ -271,6 +271,7 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         max_delta_bic=float(wf.get("max_delta_bic", -10.0)),
         min_runs_improved=float(wf.get("min_runs_improved", 0.5)),
         noise_factor=float(wf.get("noise_factor", 2.0)),
+        physical_evidence=bool(wf.get("physical_evidence", True)),
         progress=progress,
     )
     model_error = None

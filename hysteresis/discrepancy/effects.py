@@ -75,9 +75,10 @@ class Effect:
     ) -> FloatArray:
         return np.empty((run.n, 0))
 
-    def pinned(self, theta: Any) -> bool:
-        """Does ``theta`` sit at the end of the term's physically plausible range?"""
-        return False
+    def sign_ok(self, ident: RunData, coef: FloatArray) -> bool | None:
+        """Do the term's fitted coefficients have the sign its physics allows? (``None``: the
+        hypothesis allows either sign.)"""
+        return None
 
     #: Acts on a Gamma base's play operators (their widths scaled by :meth:`scale`) instead of
     #: transforming the input; with any other base the input-side form is used.
@@ -130,11 +131,6 @@ class RateDependence(Effect):
         v0, c = theta
         return np.asarray(u - c * np.tanh(run.v / v0), dtype=np.float64)
 
-    def pinned(self, theta: Any) -> bool:
-        # Only the speed-scaled plays (theta = (1, v0, g)) carry a friction gain; a gain at the
-        # top of its range asks for widening without bound, which is a latency, not friction.
-        return len(theta) == 3 and float(theta[2]) >= 0.98 * self.g_max
-
     def scale(self, run: RunData, theta: Any) -> FloatArray:
         """Friction factor 1 + g tanh(|v| / v0) of the speed-scaled play operators."""
         _, v0, g = theta
@@ -166,6 +162,14 @@ class TendonElongation(Effect):
 
     def available(self, run: RunData) -> bool:
         return run.tension is not None
+
+    def sign_ok(self, ident: RunData, coef: FloatArray) -> bool | None:
+        """Stretch under tension can only make the output fall short of the base's: both
+        coefficients must pull against the direction in which pulling moves the output. A fit
+        that needs a tension-shaped *gain* is using the tension as a stand-in for something
+        else (a latency, a dead zone, direction-dependent friction)."""
+        gain = float(np.sign(np.cov(ident.u, ident.y)[0, 1])) or 1.0
+        return bool(np.all(gain * np.asarray(coef) <= 0.0))
 
     def grid(self, ident: RunData) -> list[float]:
         return [0.1, 0.2, 0.35, 0.5, 0.75, 1.0]

@@ -33,6 +33,7 @@ from hysteresis.discrepancy.effects import (
     Term,
     fit_with_effect,
 )
+from hysteresis.discrepancy.friction import corroboration
 from hysteresis.discrepancy.locate import autocorrelation, locate
 from hysteresis.discrepancy.runs import RunData, concat_runs
 
@@ -51,6 +52,10 @@ class WorkflowSettings:
     min_runs_improved: float = 0.5
     #: Stop when the held-out RMSE is within this factor of the measurement-noise floor.
     noise_factor: float = 2.0
+    #: Physical evidence beyond the output fit: a friction candidate must show in the load
+    #: cells' friction reading and go first when it does; a term's coefficients must carry
+    #: the sign its physics allows (False: judge on the output alone, for comparison).
+    physical_evidence: bool = True
     progress: bool = False
 
 
@@ -132,7 +137,8 @@ def fit_models(base_factory: BaseFactory, groups: Sequence[Group],
 def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[Group],
                     terms: dict[str, list[Term]], before: Evaluation,
                     n_eff: float) -> dict[str, Any]:
-    """Add ``effect`` to every configuration's model, refit, and measure what it removes."""
+    """Add ``effect`` to every configuration's model, refit, and measure what it removes;
+    for a friction hypothesis, also read the load cells for the change it claims."""
     models = {g.key: fit_with_effect(base_factory, terms.get(g.key, []), effect, g.ident)
               for g in groups}
     after = evaluate(models, groups)
@@ -169,17 +175,34 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
         "n_params": k,
         "runs_improved": improved,
         "residual_explained": explained,
-        # A physical parameter that runs to the end of its plausible range in every
-        # configuration: the hypothesis is being stretched to mimic another effect.
-        "pinned_at_bound": all(effect.pinned(models[g.key].terms[-1].theta) for g in groups),
+        # A friction hypothesis must show in the friction the load cells read (None: it makes
+        # no friction claim, or the runs carry no tension at both ends).
+        "friction_evidence": corroboration(effect.name, [g.ident for g in groups]),
+        # The term's coefficients carry the sign its physics allows in every configuration
+        # (None: either sign is physical).
+        "physical_sign": _sign_ok(effect, groups, models),
         "heldout_per_run": {rid: {"before": r0[rid], "after": r1[rid]} for rid in r0},
         "parameters": params,
     }
 
 
+def _sign_ok(effect: Effect, groups: Sequence[Group],
+             models: dict[str, ComposedModel]) -> bool | None:
+    if effect.n_linear == 0:
+        return None
+    verdicts = [effect.sign_ok(g.ident, models[g.key].coef_[-effect.n_linear:]) for g in groups]
+    if all(v is None for v in verdicts):
+        return None
+    return all(v is not False for v in verdicts)
+
+
 def _accept(s: dict[str, Any], st: WorkflowSettings) -> bool:
-    return bool(s["relative_gain"] >= st.min_relative_gain and s["delta_bic"] <= st.max_delta_bic
-                and s["runs_improved"] >= st.min_runs_improved and not s["pinned_at_bound"])
+    fit_ok = (s["relative_gain"] >= st.min_relative_gain and s["delta_bic"] <= st.max_delta_bic
+              and s["runs_improved"] >= st.min_runs_improved)
+    if not st.physical_evidence:
+        return bool(fit_ok)
+    return bool(fit_ok and s["friction_evidence"]["corroborated"] is not False
+                and s["physical_sign"] is not False)
 
 
 def _compact_locate(loc: dict[str, Any]) -> dict[str, Any]:
@@ -284,7 +307,11 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                 failed[name] = str(err)
         scores.sort(key=lambda s: s["delta_bic"])
         rankings.append([_public(s) for s in scores])
-        winner = next((s for s in scores if _accept(s, st)), None)
+        # A friction change the load cells show is measured, not inferred from the output:
+        # an acceptable candidate with that corroboration goes ahead of the others.
+        winner = next((s for s in scores if st.physical_evidence and _accept(s, st)
+                       and s["friction_evidence"]["corroborated"]), None)
+        winner = winner or next((s for s in scores if _accept(s, st)), None)
         if winner is None:
             break
         eff = CANDIDATES[winner["name"]]
@@ -297,6 +324,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
             "n_params": winner["n_params"],
             "runs_improved": winner["runs_improved"],
             "residual_explained": winner["residual_explained"],
+            "friction_evidence": winner["friction_evidence"],
+            "physical_sign": winner["physical_sign"],
             "heldout_per_run": winner["heldout_per_run"],
             "parameters": winner["parameters"],
             "runner_up": next((
@@ -363,7 +392,7 @@ def _reach_note(within: list[str], base_name: str) -> str:
 def _public(s: dict[str, Any]) -> dict[str, Any]:
     keys = ("name", "relative_gain", "delta_bic", "rmse_before", "rmse_after",
             "heldout_rmse_before", "heldout_rmse_after", "runs_improved", "residual_explained",
-            "pinned_at_bound")
+            "friction_evidence", "physical_sign")
     return {k: s[k] for k in keys}
 
 

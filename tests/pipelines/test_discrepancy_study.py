@@ -1,0 +1,89 @@
+"""The discrepancy-study stage: config, bad input, the tables, and one real case end to end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+
+from pipelines import discrepancy_study as study
+from pipelines.common import CONF_DIR, to_container
+
+
+def _cfg(tmp_path: Path, **over: object) -> dict[str, object]:
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = to_container(compose(config_name="discrepancy_study",
+                                   overrides=[f"paths.root={tmp_path}", "tracking=off",
+                                              "progress=false", "n_jobs=1"]))
+    cfg.update(over)
+    return cfg
+
+
+def test_config_composes_with_every_effect_and_five_pairs(tmp_path: Path) -> None:
+    from rig_io.virtual.effects import EFFECT_NAMES
+
+    cfg = _cfg(tmp_path)
+    assert set(cfg["strengths"]) == set(EFFECT_NAMES)
+    assert cfg["pairs_selected"] == ["a", "b", "c", "d", "e"]
+    assert all(len(cfg["pairs"][p]) == 2 for p in cfg["pairs_selected"])
+    assert cfg["out"] == f"{tmp_path}/data/reports/discrepancy_study"
+
+
+@pytest.mark.parametrize(("over", "message"), [
+    ({"strengths": {"friction_creep": [1.0]}}, "unknown effect"),
+    ({"pairs_selected": ["zz"]}, "unknown pair"),
+    ({"effects_selected": ["drift", "creep"]}, "have no strengths"),
+    ({"workflow": {"min_gain": 0.1}}, "unknown workflow setting"),
+    ({"out": ""}, "out=<path stem> is required"),
+])
+def test_bad_configuration_is_named(tmp_path: Path, over: dict[str, object],
+                                    message: str) -> None:
+    with pytest.raises(study.StudyError, match=message):
+        study.run(_cfg(tmp_path, **over))
+
+
+def _case(effect: str, strength: float, pair: str, named: list[str], per: dict[str, float],
+          ) -> dict[str, object]:
+    correct = named[:1] == [effect] if effect != "clean" else not named
+    return {"effect": effect, "strength": strength, "pair": pair, "named": named,
+            "first_named": named[0] if named else None, "correct": correct,
+            "heldout_rmse_before": 0.1, "reduction": min(per.values()) if per else 0.0,
+            "reduction_per_configuration": per,
+            "halved": bool(correct and effect != "clean" and per and min(per.values()) >= 0.5)}
+
+
+def test_detection_limits_take_the_smallest_strength_and_list_misnamings() -> None:
+    cases = [
+        _case("clean", 0.0, "a", [], {}),
+        _case("drift", 0.5, "a", ["tendon_elongation"], {"x": 0.2, "y": 0.2}),
+        _case("drift", 1.0, "a", ["drift"], {"x": 0.6, "y": 0.4}),
+        _case("drift", 2.0, "a", ["drift"], {"x": 0.7, "y": 0.6}),
+        _case("drift", 4.0, "a", ["drift"], {"x": 0.8, "y": 0.7}),
+    ]
+    lim = study.detection_limits(cases)
+    assert lim == {"drift": {"a": {"named_from": 1.0, "halved_from": 2.0,
+                                   "mistaken_for": ["tendon_elongation at 0.5"]}}}
+    md = study.markdown(cases)
+    assert "| drift | a | 1 | 2 | tendon_elongation at 0.5 |" in md
+    assert "| a | drift | 1 | 0.100 | drift | 40 % | 40 % | no |" in md
+    assert "Clean runs: a no_missing_effect" in md
+
+
+def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
+    cfg = _cfg(tmp_path, effects_selected=["time_delay"], pairs_selected=["a"])
+    cfg["strengths"]["time_delay"] = [1.0]
+    cases = study.run(cfg)
+    assert [(c["effect"], c["strength"]) for c in cases] == [("clean", 0.0), ("time_delay", 1.0)]
+    clean, delay = cases
+    assert clean["correct"] and clean["named"] == []
+    assert delay["first_named"] == "time_delay" and delay["halved"]
+    assert set(delay["reduction_per_configuration"]) == {
+        "curve_angle_deg=90.0,radius_mm=30.0,rig=tsm-bench",
+        "curve_angle_deg=45.0,radius_mm=60.0,rig=tsm-bench"}
+    out = tmp_path / "data" / "reports"
+    doc = json.loads((out / "discrepancy_study.json").read_text())
+    assert doc["detection_limits"]["time_delay"]["a"]["halved_from"] == 1.0
+    assert "| time_delay | a | 1 | 1 | - |" in (out / "discrepancy_study.md").read_text()
+    assert not list(out.glob("*.tmp*"))
