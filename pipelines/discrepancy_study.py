@@ -1,7 +1,7 @@
 """Stage ``discrepancy_study``: how strong must each effect be before the workflow finds it?
 
     python -m pipelines.discrepancy_study                      # conf/discrepancy_study.yaml
-    python -m pipelines.discrepancy_study effects_selected=[drift] 'strengths.drift=[1,2]' pairs_selected=[a]
+    python -m pipelines.discrepancy_study effects_selected=[drift] 'strengths.drift=[1,2]'
     python -m pipelines.discrepancy_study +workflow.physical_evidence=false
 
 For every (effect, strength, configuration pair) the virtual rig simulates the pair's runs with

@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from hysteresis.discrepancy._ops import FloatArray, velocity
+from hysteresis.discrepancy._ops import FloatArray
+from hysteresis.discrepancy.effects import speed
 from hysteresis.discrepancy.runs import RunData
 
 #: Evidence thresholds: a friction claim needs the reading to change by at least this factor.
@@ -59,7 +60,7 @@ def friction_reading(run: RunData, *, plateau_fraction: float = 0.3,
     when the run has no tension at both ends."""
     if run.tension is None or run.tension_out is None:
         return None
-    v = velocity(run.t, run.u, window_s=0.5 * run.dt)
+    v = speed(run)  # the speed the rate term uses
     moving = np.abs(v) > 0.05 * float(np.percentile(np.abs(v), 99))
     travel = travel_since_reversal(run.u, np.where(moving, v, 0.0))
     full = moving & (travel > plateau_fraction * float(np.ptp(run.u)))

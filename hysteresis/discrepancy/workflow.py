@@ -136,9 +136,10 @@ def fit_models(base_factory: BaseFactory, groups: Sequence[Group],
 
 def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[Group],
                     terms: dict[str, list[Term]], before: Evaluation,
-                    n_eff: float) -> dict[str, Any]:
+                    n_eff: float, friction: dict[str, Any] | None = None) -> dict[str, Any]:
     """Add ``effect`` to every configuration's model, refit, and measure what it removes;
-    for a friction hypothesis, also read the load cells for the change it claims."""
+    for a friction hypothesis, also read the load cells for the change it claims
+    (``friction``: that reading when already made, it does not depend on the model)."""
     models = {g.key: fit_with_effect(base_factory, terms.get(g.key, []), effect, g.ident)
               for g in groups}
     after = evaluate(models, groups)
@@ -177,7 +178,8 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
         "residual_explained": explained,
         # A friction hypothesis must show in the friction the load cells read (None: it makes
         # no friction claim, or the runs carry no tension at both ends).
-        "friction_evidence": corroboration(effect.name, [g.ident for g in groups]),
+        "friction_evidence": friction if friction is not None else corroboration(
+            effect.name, [g.ident for g in groups]),
         # The term's coefficients carry the sign its physics allows in every configuration
         # (None: either sign is physical).
         "physical_sign": _sign_ok(effect, groups, models),
@@ -282,6 +284,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     remaining = [n for n in st.candidates if all(CANDIDATES[n].available(r) for r in all_runs)]
     skipped = [n for n in st.candidates if n not in remaining]
     failed: dict[str, str] = {}
+    # The load cells' reading depends on the data only: made once, reused every round.
+    friction = {n: corroboration(n, [g.ident for g in groups]) for n in remaining}
     for round_ in range(st.max_effects + 1):
         preds = [current.ident_pred.get(r.run_id, current.held_pred.get(r.run_id))
                  for r in all_runs]
@@ -300,7 +304,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         for name in it:
             try:
                 scores.append(score_candidate(CANDIDATES[name], base_factory, groups, terms,
-                                              current, n_eff))
+                                              current, n_eff, friction[name]))
             except HysteresisError as err:
                 # The base cannot be refitted with this term (e.g. a density that no longer
                 # fits): the candidate is reported as not scorable, the others go on.
