@@ -123,6 +123,52 @@ def study_case(effect: str | None, strength: float, pair: str,
     return case
 
 
+def combination_case(effects: Mapping[str, float], pair: str,
+                     configs: Sequence[tuple[float, float]], *, seed: int = 3,
+                     rate_hz: float = 20.0, base: str = "gamma",
+                     workflow: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Several effects hidden at once: are they all named (in any order), and how much of the
+    held-out RMSE do the added terms remove together, in each configuration?"""
+    runs = hidden_effect_runs(effects, configs, seed=seed, rate_hz=rate_hz)
+    rep = run_workflow(runs, base_factory_for(base), base_name=base,
+                       settings=WorkflowSettings(**dict(workflow or {})))
+    named = [e["name"] for e in rep["effects"]]
+    before = per_configuration_heldout(rep, 0)
+    after = per_configuration_heldout(rep, len(named))
+    return {"effects": dict(effects), "label": " + ".join(f"{k} {v:g}" for k, v in
+                                                          effects.items()),
+            "pair": pair, "named": named, "all_named": set(effects) <= set(named),
+            "extra": [n for n in named if n not in effects],
+            "heldout_rmse_before": rep["summary"]["heldout_rmse_before"],
+            "heldout_rmse_after": rep["summary"]["heldout_rmse_after"],
+            "reduction": rep["summary"]["heldout_reduction"],
+            "reduction_per_configuration": {k: 1.0 - after[k] / before[k] for k in before}}
+
+
+def run_combinations(*, strengths: Mapping[str, float], pairs: Mapping[str, Any],
+                     seed: int = 3, rate_hz: float = 20.0, base: str = "gamma",
+                     workflow: Mapping[str, Any] | None = None, n_jobs: int = 2,
+                     progress: bool = True) -> list[dict[str, Any]]:
+    """Every two-effect combination of ``strengths`` (one strength per effect) on each pair."""
+    from itertools import combinations
+
+    from joblib import Parallel, delayed
+    from tqdm import tqdm
+
+    from rig_io.virtual.effects import EFFECT_NAMES
+
+    bad = sorted(set(strengths) - set(EFFECT_NAMES))
+    if bad:
+        raise StudyError(f"combinations: unknown effect(s) {bad}; known: {list(EFFECT_NAMES)}")
+    jobs = [({a: float(strengths[a]), b: float(strengths[b])}, p)
+            for p in pairs for a, b in combinations(sorted(strengths), 2)]
+    it = tqdm(jobs, desc="two-effect combinations", disable=not progress)
+    return list(Parallel(n_jobs=n_jobs)(
+        delayed(combination_case)(e, p, [(float(c[0]), float(c[1])) for c in pairs[p]],
+                                  seed=seed, rate_hz=rate_hz, base=base, workflow=workflow)
+        for e, p in it))
+
+
 def run_study(*, strengths: Mapping[str, Sequence[float]],
               pairs: Mapping[str, Sequence[Sequence[float]]], seed: int = 3,
               rate_hz: float = 20.0, base: str = "gamma",
@@ -208,6 +254,22 @@ def markdown(cases: Sequence[Mapping[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def markdown_combinations(cases: Sequence[Mapping[str, Any]]) -> str:
+    """Two-effect cases as Markdown."""
+    ok = sum(bool(c["all_named"]) for c in cases)
+    lines = ["", "## Two effects at once", "",
+             f"Both effects named in {ok} of {len(cases)} cases; `reduction` is the held-out RMSE "
+             "removed by all added terms (pooled; worst configuration).", "",
+             "| pair | hidden effects | named (in order) | both named | before (mm) | reduction "
+             "| worst configuration |", "|---|---|---|---|---|---|---|"]
+    for c in cases:
+        per = c["reduction_per_configuration"].values()
+        lines.append(f"| {c['pair']} | {c['label']} | {', '.join(c['named']) or '-'} | "
+                     f"{'yes' if c['all_named'] else 'no'} | {c['heldout_rmse_before']:.3f} | "
+                     f"{100 * c['reduction']:.0f} % | {100 * min(per):.0f} % |")
+    return "\n".join(lines) + "\n"
+
+
 def _fmt(x: float | None) -> str:
     return "not reached" if x is None else f"{x:g}"
 
@@ -230,6 +292,20 @@ def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
             raise StudyError(f"effects_selected {unknown} have no strengths; "
                              f"defined: {sorted(strengths)}")
         strengths = {e: strengths[e] for e in effects}
+    # Check the two-effect part before the long single-effect part runs.
+    combos_cfg = dict(cfg.get("combinations") or {})
+    cpairs = list(combos_cfg.get("pairs_selected") or [])
+    if combos_cfg.get("strengths"):
+        from rig_io.virtual.effects import EFFECT_NAMES
+
+        missing = [p for p in cpairs if p not in all_pairs]
+        if missing:
+            raise StudyError(f"combinations: unknown pair(s) {missing}; defined: "
+                             f"{sorted(all_pairs)}")
+        bad = sorted(set(combos_cfg["strengths"]) - set(EFFECT_NAMES))
+        if bad:
+            raise StudyError(f"combinations: unknown effect(s) {bad}; "
+                             f"known: {list(EFFECT_NAMES)}")
     t0 = time.perf_counter()
     cases = run_study(strengths=strengths,
                       pairs={p: all_pairs[p] for p in chosen}, seed=int(cfg.get("seed", 3)),
@@ -237,22 +313,34 @@ def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
                       base=str(cfg.get("base_family", "gamma")),
                       workflow=dict(cfg.get("workflow") or {}),
                       n_jobs=int(cfg.get("n_jobs", 2)), progress=bool(cfg.get("progress", True)))
+    combos: list[dict[str, Any]] = []
+    if combos_cfg.get("strengths"):
+        combos = run_combinations(strengths=dict(combos_cfg["strengths"]),
+                                  pairs={p: all_pairs[p] for p in cpairs},
+                                  seed=int(cfg.get("seed", 3)),
+                                  rate_hz=float(cfg.get("rate_hz", 20.0)),
+                                  base=str(cfg.get("base_family", "gamma")),
+                                  workflow=dict(cfg.get("workflow") or {}),
+                                  n_jobs=int(cfg.get("n_jobs", 2)),
+                                  progress=bool(cfg.get("progress", True)))
     doc = {"cases": cases, "detection_limits": detection_limits(cases),
+           "combinations": combos,
            "settings": {k: cfg.get(k) for k in ("seed", "rate_hz", "base_family", "workflow",
                                                "strengths")},
            "pairs": {p: all_pairs[p] for p in chosen},
            "elapsed_s": round(time.perf_counter() - t0, 1)}
     json_path, md_path = out.with_suffix(".json"), out.with_suffix(".md")
     write_text_atomic(json_path, json.dumps(doc, indent=1) + "\n")
-    write_text_atomic(md_path, markdown(cases))
-    _track(cfg, cases, [json_path, md_path])
+    write_text_atomic(md_path, markdown(cases) + (markdown_combinations(combos) if combos
+                                                   else ""))
+    _track(cfg, cases, [json_path, md_path], combos)
     log.info("wrote %s and %s (%d cases, %.0f s)", json_path, md_path, len(cases),
              doc["elapsed_s"])
     return cases
 
 
 def _track(cfg: Mapping[str, Any], cases: Sequence[Mapping[str, Any]],
-           files: Sequence[Path]) -> None:
+           files: Sequence[Path], combos: Sequence[Mapping[str, Any]] = ()) -> None:
     tracking = dict(cfg.get("tracking") or {})
     if not tracking.get("enabled", False):
         return
@@ -267,6 +355,9 @@ def _track(cfg: Mapping[str, Any], cases: Sequence[Mapping[str, Any]],
                    for c in cases if math.isfinite(c["reduction"])}
         metrics["cases_correct"] = float(sum(bool(c["correct"]) for c in cases))
         metrics["cases"] = float(len(cases))
+        if combos:
+            metrics["combinations_all_named"] = float(sum(bool(c["all_named"]) for c in combos))
+            metrics["combinations"] = float(len(combos))
         params = {"base_family": str(cfg.get("base_family", "gamma")),
                   **{f"workflow.{k}": str(v) for k, v in (cfg.get("workflow") or {}).items()}}
         tracker.log(run_id, params=params, metrics=metrics)

@@ -56,6 +56,10 @@ class WorkflowSettings:
     #: cells' friction reading and go first when it does; a term's coefficients must carry
     #: the sign its physics allows (False: judge on the output alone, for comparison).
     physical_evidence: bool = True
+    #: When no single candidate clears the bar, try every pair: two effects that interact
+    #: (the base bends to one and hides the other) are added together when the pair removes
+    #: at least ``min_relative_gain`` more than its better member alone.
+    pair_search: bool = True
     progress: bool = False
 
 
@@ -198,6 +202,56 @@ def _sign_ok(effect: Effect, groups: Sequence[Group],
     return all(v is not False for v in verdicts)
 
 
+def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: Sequence[Group],
+               current: Evaluation, n_eff: float, friction: dict[str, Any],
+               st: WorkflowSettings) -> list[dict[str, Any]]:
+    """Two candidates that clear the bar only together (greedy search cannot see them).
+
+    Every pair of candidates whose evidence does not contradict them is tried: the one with
+    the better delta BIC alone is fitted first, the other on top. The pair is judged against
+    the model before both, like a single candidate (gain, delta BIC with both terms'
+    parameters, held-out runs improved), and must also remove ``min_relative_gain`` more than
+    its better member alone: the interaction itself has to clear the bar, so a strong single
+    term cannot carry a passenger in. Returns ``[first, second]`` scores (the second relative
+    to the first) of the best pair by delta BIC, or ``[]``.
+    """
+    from itertools import combinations
+
+    pool = [s for s in scores
+            if not st.physical_evidence or (s["friction_evidence"]["corroborated"] is not False
+                                            and s["physical_sign"] is not False)]
+    h0 = _rmse(current.errors(groups)[1])
+    r0 = current.per_run_rmse(groups)
+    best: list[dict[str, Any]] = []
+    best_bic = np.inf
+    for a, b in combinations(pool, 2):  # scores are sorted by delta BIC: a is the better one
+        on_a = {g.key: list(a["models"][g.key].terms) for g in groups}
+        try:
+            s2 = score_candidate(CANDIDATES[b["name"]], base_factory, groups, on_a, a["after"],
+                                 n_eff, friction[b["name"]])
+        except HysteresisError:
+            continue
+        h1 = s2["heldout_rmse_after"]
+        k = a["n_params"] + s2["n_params"]
+        d_bic = (n_eff * float(np.log(max(h1, 1e-300) ** 2 / max(h0, 1e-300) ** 2))
+                 + k * float(np.log(n_eff)))
+        r1 = s2["after"].per_run_rmse(groups)
+        gain = 1.0 - h1 / h0 if h0 > 0 else 0.0
+        joint = {"names": [a["name"], b["name"]], "relative_gain": gain, "delta_bic": d_bic,
+                 "n_params": k, "runs_improved": float(np.mean([r1[i] < r0[i] for i in r0])),
+                 "gain_over_better_member": gain - max(a["relative_gain"], b["relative_gain"]),
+                 "heldout_rmse_before": h0, "heldout_rmse_after": h1}
+        if (gain >= st.min_relative_gain and d_bic <= st.max_delta_bic
+                and joint["gain_over_better_member"] >= st.min_relative_gain
+                and joint["runs_improved"] >= st.min_runs_improved
+                and (not st.physical_evidence or s2["physical_sign"] is not False)
+                and d_bic < best_bic):
+            best_bic = d_bic
+            s2["pair"] = joint
+            best = [a, s2]
+    return best
+
+
 def _accept(s: dict[str, Any], st: WorkflowSettings) -> bool:
     fit_ok = (s["relative_gain"] >= st.min_relative_gain and s["delta_bic"] <= st.max_delta_bic
               and s["runs_improved"] >= st.min_runs_improved)
@@ -316,45 +370,52 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         winner = next((s for s in scores if st.physical_evidence and _accept(s, st)
                        and s["friction_evidence"]["corroborated"]), None)
         winner = winner or next((s for s in scores if _accept(s, st)), None)
-        if winner is None:
+        added = [winner] if winner is not None else []
+        if not added and st.pair_search and st.max_effects - len(effects) >= 2:
+            added = _best_pair(scores, base_factory, groups, current, n_eff, friction, st)
+        if not added:
             break
-        eff = CANDIDATES[winner["name"]]
-        evidence = {
-            "signature": eff.signature,
-            "term": eff.term,
-            "relative_gain": winner["relative_gain"],
-            "delta_bic": winner["delta_bic"],
-            "n_eff": winner["n_eff"],
-            "n_params": winner["n_params"],
-            "runs_improved": winner["runs_improved"],
-            "residual_explained": winner["residual_explained"],
-            "friction_evidence": winner["friction_evidence"],
-            "physical_sign": winner["physical_sign"],
-            "heldout_per_run": winner["heldout_per_run"],
-            "parameters": winner["parameters"],
-            "runner_up": next((
-                {"name": s["name"], "delta_bic": s["delta_bic"],
-                 "relative_gain": s["relative_gain"]}
-                for s in scores if s is not winner), None),
-            "located_before": _signature_stats(loc),
-        }
-        if model_error:
-            evidence["model_error_regression"] = _regress_model_error(
-                model_error, groups, current, winner["after"])
-        effects.append({
-            "name": winner["name"],
-            "evidence": evidence,
-            "rmse_before": winner["rmse_before"],
-            "rmse_after": winner["rmse_after"],
-            "heldout_rmse_before": winner["heldout_rmse_before"],
-            "heldout_rmse_after": winner["heldout_rmse_after"],
-        })
-        for g in groups:
-            terms[g.key] = list(winner["models"][g.key].terms)
-        models = winner["models"]
-        current = winner["after"]
-        evaluations.append(current)
-        remaining.remove(winner["name"])
+        for k, chosen in enumerate(added):
+            eff = CANDIDATES[chosen["name"]]
+            evidence = {
+                "signature": eff.signature,
+                "term": eff.term,
+                "relative_gain": chosen["relative_gain"],
+                "delta_bic": chosen["delta_bic"],
+                "n_eff": chosen["n_eff"],
+                "n_params": chosen["n_params"],
+                "runs_improved": chosen["runs_improved"],
+                "residual_explained": chosen["residual_explained"],
+                "friction_evidence": chosen["friction_evidence"],
+                "physical_sign": chosen["physical_sign"],
+                "heldout_per_run": chosen["heldout_per_run"],
+                "parameters": chosen["parameters"],
+                "runner_up": next((
+                    {"name": s["name"], "delta_bic": s["delta_bic"],
+                     "relative_gain": s["relative_gain"]}
+                    for s in scores if s["name"] != chosen["name"]), None),
+                "located_before": _signature_stats(loc),
+            }
+            if len(added) == 2:
+                evidence["added_jointly_with"] = added[1 - k]["name"]
+                evidence["pair"] = added[1]["pair"]
+            if model_error:
+                evidence["model_error_regression"] = _regress_model_error(
+                    model_error, groups, current, chosen["after"])
+            effects.append({
+                "name": chosen["name"],
+                "evidence": evidence,
+                "rmse_before": chosen["rmse_before"],
+                "rmse_after": chosen["rmse_after"],
+                "heldout_rmse_before": chosen["heldout_rmse_before"],
+                "heldout_rmse_after": chosen["heldout_rmse_after"],
+            })
+            for g in groups:
+                terms[g.key] = list(chosen["models"][g.key].terms)
+            models = chosen["models"]
+            current = chosen["after"]
+            evaluations.append(current)
+            remaining.remove(chosen["name"])
     e_id0, e_h0 = evaluations[0].errors(groups)
     e_id1, e_h1 = current.errors(groups)
     report: dict[str, Any] = {

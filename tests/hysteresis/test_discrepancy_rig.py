@@ -146,6 +146,20 @@ def test_dead_zone_is_within_reach_of_play_operators_with_an_offset():
     assert dz["summary"]["heldout_rmse_before"] < 1.4 * clean["summary"]["heldout_rmse_before"]
 
 
+def test_interacting_effects_are_found_as_a_pair():
+    # With a strong friction asymmetry, the sum-to-one Gamma bends to mimic part of it with
+    # the latency's help: alone, the correct 50 ms delay makes the held-out error worse and
+    # the asymmetry term removes 14 %. Greedy search finds nothing; the pair clears the bar.
+    rep = report({"asymmetry": 2.0, "time_delay": 1.0})
+    assert [e["name"] for e in rep["effects"]][:2] == ["asymmetry", "time_delay"]
+    assert rep["effects"][0]["evidence"]["added_jointly_with"] == "time_delay"
+    pair = rep["effects"][1]["evidence"]["pair"]
+    assert pair["relative_gain"] > 0.5 and pair["gain_over_better_member"] >= 0.2
+    greedy = report({"asymmetry": 2.0, "time_delay": 1.0},
+                    settings=WorkflowSettings(pair_search=False))
+    assert greedy["verdict"] == "no_missing_effect"
+
+
 @pytest.mark.parametrize("effects", [
     {"time_delay": 1.0, "drift": 2.0},
     {"rate_dependence": 1.0, "drift": 2.0},

@@ -29,6 +29,7 @@ def test_config_composes_with_every_effect_and_five_pairs(tmp_path: Path) -> Non
     assert cfg["pairs_selected"] == ["a", "b", "c", "d", "e"]
     assert all(len(cfg["pairs"][p]) == 2 for p in cfg["pairs_selected"])
     assert cfg["out"] == f"{tmp_path}/data/reports/discrepancy_study"
+    assert set(cfg["combinations"]["strengths"]) == set(EFFECT_NAMES)
 
 
 @pytest.mark.parametrize(("over", "message"), [
@@ -36,6 +37,10 @@ def test_config_composes_with_every_effect_and_five_pairs(tmp_path: Path) -> Non
     ({"pairs_selected": ["zz"]}, "unknown pair"),
     ({"effects_selected": ["drift", "creep"]}, "have no strengths"),
     ({"workflow": {"min_gain": 0.1}}, "unknown workflow setting"),
+    ({"effects_selected": [], "combinations": {"strengths": {"creep": 1.0},
+                                               "pairs_selected": ["a"]}}, "unknown effect"),
+    ({"effects_selected": [], "combinations": {"strengths": {"drift": 1.0},
+                                               "pairs_selected": ["q"]}}, "unknown pair"),
     ({"out": ""}, "out=<path stem> is required"),
 ])
 def test_bad_configuration_is_named(tmp_path: Path, over: dict[str, object],
@@ -72,7 +77,9 @@ def test_detection_limits_take_the_smallest_strength_and_list_misnamings() -> No
 
 
 def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
-    cfg = _cfg(tmp_path, effects_selected=["time_delay"], pairs_selected=["a"])
+    cfg = _cfg(tmp_path, effects_selected=["time_delay"], pairs_selected=["a"],
+               combinations={"strengths": {"time_delay": 1.0, "drift": 2.0},
+                             "pairs_selected": ["a"]})
     cfg["strengths"]["time_delay"] = [1.0]
     cases = study.run(cfg)
     assert [(c["effect"], c["strength"]) for c in cases] == [("clean", 0.0), ("time_delay", 1.0)]
@@ -87,3 +94,9 @@ def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
     assert doc["detection_limits"]["time_delay"]["a"]["halved_from"] == 1.0
     assert "| time_delay | a | 1 | 1 | - |" in (out / "discrepancy_study.md").read_text()
     assert not list(out.glob("*.tmp*"))
+    # the two-effect part: one combination, both named, in the JSON and the table
+    (combo,) = doc["combinations"]
+    assert combo["effects"] == {"drift": 2.0, "time_delay": 1.0}
+    assert combo["all_named"] and not combo["extra"] and combo["reduction"] > 0.5
+    assert "| a | drift 2 + time_delay 1 | time_delay, drift | yes |" in (
+        out / "discrepancy_study.md").read_text()
