@@ -272,6 +272,7 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         min_runs_improved=float(wf.get("min_runs_improved", 0.5)),
         noise_factor=float(wf.get("noise_factor", 2.0)),
         physical_evidence=bool(wf.get("physical_evidence", True)),
+        pair_search=bool(wf.get("pair_search", True)),
         progress=progress,
     )
     model_error = None
