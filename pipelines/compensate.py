@@ -700,13 +700,11 @@ def run(cfg: Mapping[str, Any], *, backend: RigBackend | None = None) -> dict[st
 
 def _track(cfg: Mapping[str, Any], tables: Mapping[str, pd.DataFrame],
            metrics: Mapping[str, float], art: Artifacts) -> None:
-    tracking = dict(cfg.get("tracking") or {})
-    if not tracking.get("enabled", False):
-        return
-    from pipelines.tracking import StageRun, Tracker, flatten, settings_from_config
+    from pipelines.tracking import StageRun, flatten, stage_tracker
 
-    root = (cfg.get("paths") or {}).get("root", ".")
-    tracker = Tracker(settings_from_config(tracking, root=root))
+    tracker = stage_tracker(cfg)
+    if tracker is None:
+        return
     with StageRun(tracker, "compensate") as stage:
         with tracker.run("compensate", parent_id=stage.parent_id,
                          tags={"stage": "compensate", "kind": "experiment"}) as run_id:

@@ -323,13 +323,11 @@ def _json_default(obj: Any) -> Any:
 
 def _track(cfg: Mapping[str, Any], report: Mapping[str, Any], report_path: Path,
            plots: list[Path]) -> None:
-    tracking = dict(cfg.get("tracking") or {})
-    if not tracking.get("enabled", False):
-        return
-    from pipelines.tracking import StageRun, Tracker, settings_from_config
+    from pipelines.tracking import StageRun, stage_tracker
 
-    root = (cfg.get("paths") or {}).get("root", ".")
-    tracker = Tracker(settings_from_config(tracking, root=root))
+    tracker = stage_tracker(cfg)
+    if tracker is None:
+        return
     with StageRun(tracker, "discrepancy") as stage:
         with tracker.run("discrepancy", parent_id=stage.parent_id,
                          tags={"stage": "discrepancy", "kind": "analysis",

@@ -341,13 +341,11 @@ def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
 
 def _track(cfg: Mapping[str, Any], cases: Sequence[Mapping[str, Any]],
            files: Sequence[Path], combos: Sequence[Mapping[str, Any]] = ()) -> None:
-    tracking = dict(cfg.get("tracking") or {})
-    if not tracking.get("enabled", False):
-        return
-    from pipelines.tracking import StageRun, Tracker, settings_from_config
+    from pipelines.tracking import StageRun, stage_tracker
 
-    tracker = Tracker(settings_from_config(tracking, root=(cfg.get("paths") or {}).get("root",
-                                                                                       ".")))
+    tracker = stage_tracker(cfg)
+    if tracker is None:
+        return
     with StageRun(tracker, "discrepancy_study") as stage, tracker.run(
             "discrepancy_study", parent_id=stage.parent_id,
             tags={"stage": "discrepancy_study", "kind": "analysis"}) as run_id:

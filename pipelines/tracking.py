@@ -87,6 +87,16 @@ def settings_from_config(tracking: Mapping[str, Any], *, root: str | Path) -> Tr
     )
 
 
+def stage_tracker(cfg: Mapping[str, Any]) -> Tracker | None:
+    """The tracker for a stage's plain config (its ``tracking`` group and ``paths.root``), or
+    ``None`` when the config does not switch tracking on."""
+    tracking = dict(cfg.get("tracking") or {})
+    if not tracking.get("enabled", False):
+        return None
+    root = (cfg.get("paths") or {}).get("root", ".")
+    return Tracker(settings_from_config(tracking, root=root))
+
+
 # --------------------------------------------------------------------------------------
 # retries
 # --------------------------------------------------------------------------------------

@@ -12,10 +12,10 @@ from pipelines import discrepancy_study as study
 from pipelines.common import CONF_DIR, to_container
 
 
-def _cfg(tmp_path: Path, **over: object) -> dict[str, object]:
+def _cfg(tmp_path: Path, tracking: str = "off", **over: object) -> dict[str, object]:
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = to_container(compose(config_name="discrepancy_study",
-                                   overrides=[f"paths.root={tmp_path}", "tracking=off",
+                                   overrides=[f"paths.root={tmp_path}", f"tracking={tracking}",
                                               "progress=false", "n_jobs=1"]))
     cfg.update(over)
     return cfg
@@ -100,3 +100,18 @@ def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
     assert combo["all_named"] and not combo["extra"] and combo["reduction"] > 0.5
     assert "| a | drift 2 + time_delay 1 | time_delay, drift | yes |" in (
         out / "discrepancy_study.md").read_text()
+
+
+def test_study_is_logged_to_mlflow(tmp_path: Path) -> None:
+    import mlflow
+
+    cfg = _cfg(tmp_path, tracking="local", effects_selected=["time_delay"],
+               pairs_selected=["a"], combinations={})
+    cfg["strengths"]["time_delay"] = [1.0]
+    study.run(cfg)
+    mlflow.set_tracking_uri(f"sqlite:///{tmp_path}/mlflow.db")
+    runs = mlflow.search_runs(search_all_experiments=True)
+    child = runs[runs["metrics.cases"].notna()]
+    assert len(child) == 1 and child["metrics.cases"].iloc[0] == 2.0
+    assert child["metrics.a.time_delay.1.reduction"].iloc[0] > 0.5
+    assert set(runs["status"]) == {"FINISHED"}
