@@ -273,6 +273,7 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         noise_factor=float(wf.get("noise_factor", 2.0)),
         physical_evidence=bool(wf.get("physical_evidence", True)),
         pair_search=bool(wf.get("pair_search", True)),
+        joint_retune=bool(wf.get("joint_retune", True)),
         progress=progress,
     )
     model_error = None

@@ -576,3 +576,33 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
             if float(res.fun) < sses[best]:
                 model = build(make(float(res.x)))
     return model
+
+
+def retune(base_factory: BaseFactory, model: ComposedModel, ident: RunData, *,
+           iterations: int = 8) -> ComposedModel:
+    """Re-search the nonlinear parameter of every earlier term with the newest one in place.
+
+    Terms join one at a time, and each earlier term's nonlinear parameter (a delay, a width, a
+    speed law) was chosen while the newest effect was still unexplained, so it may have
+    stretched to cover part of it: a speed-widened loop covers a latency, and the correct
+    delay added on top then overshoots. One coordinate pass over the earlier terms (each
+    re-searched on its grid with all the others in place, kept only if the identification SSE
+    drops), then the newest term once more if any of them moved, makes the refit joint in the
+    nonlinear parameters as well as the linear ones. Only the identification run is used.
+    """
+    terms = list(model.terms)
+    best, best_sse = model, _sse(model, ident)
+    moved_any = False
+    for j in [*range(len(terms) - 1), len(terms) - 1]:
+        if not terms[j].effect.has_theta or (j == len(terms) - 1 and not moved_any):
+            continue
+        others = terms[:j] + terms[j + 1:]
+        trial = fit_with_effect(base_factory, others, terms[j].effect, ident,
+                                iterations=iterations)
+        cand = ComposedModel(base_factory, [*terms[:j], trial.terms[-1], *terms[j + 1:]],
+                             iterations=iterations).fit(ident)
+        sse = _sse(cand, ident)
+        if sse < best_sse:
+            best, best_sse, terms = cand, sse, list(cand.terms)
+            moved_any = True
+    return best

@@ -9,7 +9,9 @@ configuration's held-out runs. Each round:
    information criterion (BIC) with an effective sample size from the residual's correlation
    time, so that a term fitting noise or structure that does not generalise loses;
 3. **add**: the winner (if it clears the gain and BIC thresholds and improves most held-out
-   runs) joins the model, keeping its parameters per configuration;
+   runs) joins the model, keeping its parameters per configuration; every candidate is scored
+   after a joint refit, in which the earlier terms' nonlinear parameters are searched again
+   with the candidate in place (:func:`.effects.retune`);
 4. **show**: RMSE before/after on identification and held-out runs, recorded per effect.
 """
 
@@ -32,6 +34,7 @@ from hysteresis.discrepancy.effects import (
     Effect,
     Term,
     fit_with_effect,
+    retune,
 )
 from hysteresis.discrepancy.friction import corroboration
 from hysteresis.discrepancy.locate import autocorrelation, locate
@@ -60,6 +63,9 @@ class WorkflowSettings:
     #: (the base bends to one and hides the other) are added together when the pair removes
     #: at least ``min_relative_gain`` more than its better member alone.
     pair_search: bool = True
+    #: Search the earlier terms' nonlinear parameters again with each candidate in place
+    #: (False: they stay where they were chosen, only the linear parameters are refitted).
+    joint_retune: bool = True
     progress: bool = False
 
 
@@ -140,12 +146,16 @@ def fit_models(base_factory: BaseFactory, groups: Sequence[Group],
 
 def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[Group],
                     terms: dict[str, list[Term]], before: Evaluation,
-                    n_eff: float, friction: dict[str, Any] | None = None) -> dict[str, Any]:
+                    n_eff: float, friction: dict[str, Any] | None = None, *,
+                    joint_retune: bool = True) -> dict[str, Any]:
     """Add ``effect`` to every configuration's model, refit, and measure what it removes;
     for a friction hypothesis, also read the load cells for the change it claims
-    (``friction``: that reading when already made, it does not depend on the model)."""
-    models = {g.key: fit_with_effect(base_factory, terms.get(g.key, []), effect, g.ident)
-              for g in groups}
+    (``friction``: that reading when already made, it does not depend on the model).
+    ``joint_retune``: search the earlier terms' nonlinear parameters again (:func:`retune`)."""
+    models = {}
+    for g in groups:
+        m = fit_with_effect(base_factory, terms.get(g.key, []), effect, g.ident)
+        models[g.key] = retune(base_factory, m, g.ident) if joint_retune else m
     after = evaluate(models, groups)
     e_id0, e_h0 = before.errors(groups)
     e_id1, e_h1 = after.errors(groups)
@@ -228,7 +238,7 @@ def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: 
         on_a = {g.key: list(a["models"][g.key].terms) for g in groups}
         try:
             s2 = score_candidate(CANDIDATES[b["name"]], base_factory, groups, on_a, a["after"],
-                                 n_eff, friction[b["name"]])
+                                 n_eff, friction[b["name"]], joint_retune=st.joint_retune)
         except HysteresisError:
             continue
         h1 = s2["heldout_rmse_after"]
@@ -358,7 +368,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         for name in it:
             try:
                 scores.append(score_candidate(CANDIDATES[name], base_factory, groups, terms,
-                                              current, n_eff, friction[name]))
+                                              current, n_eff, friction[name],
+                                              joint_retune=st.joint_retune))
             except HysteresisError as err:
                 # The base cannot be refitted with this term (e.g. a density that no longer
                 # fits): the candidate is reported as not scorable, the others go on.

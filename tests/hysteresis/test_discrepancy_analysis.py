@@ -21,6 +21,7 @@ from hysteresis.discrepancy.effects import (
     Term,
     candidate,
     fit_with_effect,
+    retune,
 )
 from hysteresis.discrepancy.runs import RunData, concat_runs
 from hysteresis.discrepancy.workflow import effective_n, group_runs
@@ -275,6 +276,24 @@ def test_composed_model_stacks_terms_and_refits_jointly():
     assert [t.effect.name for t in m2.terms] == ["time_delay", "drift"]
     assert np.sqrt(np.mean((r.y - m2.predict(r)) ** 2)) < 0.01
     assert isinstance(m2.terms[0], Term) and m2.n_params == 1 + 2
+
+
+def test_retune_searches_earlier_terms_again_with_the_newest_in_place():
+    # A 0.12 s latency on top of a 0.5 mm dead zone. Alone, the delay is chosen with the dead
+    # zone unexplained; the dead zone then joins with that delay frozen. Searching the earlier
+    # term again (and the newest once more) makes the fit joint in both nonlinear parameters.
+    f = lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))  # noqa: E731
+    r = run(y=lambda t, u: shift(t, 0.9 * play(u, 0.25, z0=0.0) + 0.1, 0.12))
+    m1 = fit_with_effect(f, [], candidate("time_delay"), r)
+    frozen = fit_with_effect(f, m1.terms, candidate("dead_zone"), r)
+    joint = retune(f, frozen, r)
+    assert [t.effect.name for t in joint.terms] == ["time_delay", "dead_zone"]
+    sse = lambda m: float(np.sum((r.y - m.predict(r)) ** 2))  # noqa: E731
+    assert sse(joint) < 0.1 * sse(frozen)
+    assert joint.terms[0].theta == pytest.approx(0.12, abs=0.002)
+    assert joint.terms[1].theta == pytest.approx(0.5, rel=0.005)
+    # nothing to search again: a model of one term comes back as it was
+    assert retune(f, m1, r) is m1
 
 
 # -- bookkeeping ---------------------------------------------------------------------------
