@@ -150,13 +150,15 @@ class TendonElongation(Effect):
         "output falls short by the integral of T^2 along the tendon; the shortfall follows the "
         "tension profile (stiff at low tension, soft at high), not the sliding speed"
     )
-    term = ("c1 (T_in^2 - T_in(0)^2) + c2 mean_{r in [0, R]} (exp(2 play_r(ln T_in)) - start): "
-            "under capstan friction the tension at wrap angle theta is exp(play_{mu theta}"
-            "(ln T_in)), so the mean over thresholds spreads T^2 along the friction path "
-            "(R = mu x total wrap, a fraction of the identification run's ln T_in range, on a "
-            "grid); c1 carries the free input end and the nearly straight lead-in")
-    n_linear = 2
+    term = ("c [w (T_in^2 - T_in(0)^2) + (1 - w) mean_{r in [0, R]} (exp(2 play_r(ln T_in)) - "
+            "start)], c <= 0 (a shortfall): under capstan friction the tension at wrap angle "
+            "theta is exp(play_{mu theta}(ln T_in)), so the mean over thresholds spreads T^2 "
+            "along the friction path (R = mu x total wrap, a fraction of the identification "
+            "run's ln T_in range, on a grid); w, the share of tendon at the input tension (free "
+            "end, straight lead-in), on a grid and refined; one compliance coefficient c")
+    n_linear = 1
     has_theta = True
+    n_theta = 2
     #: Play thresholds averaged over the friction path (the profile's quadrature).
     n_profile = 8
 
@@ -164,30 +166,38 @@ class TendonElongation(Effect):
         return run.tension is not None
 
     def sign_ok(self, ident: RunData, coef: FloatArray) -> bool | None:
-        """Stretch under tension can only make the output fall short of the base's: both
-        coefficients must pull against the direction in which pulling moves the output. A fit
-        that needs a tension-shaped *gain* is using the tension as a stand-in for something
-        else (a latency, a dead zone, direction-dependent friction)."""
+        """Stretch under tension can only make the output fall short of the base's: the
+        compliance coefficient must pull against the direction in which pulling moves the
+        output. A fit that needs a tension-shaped *gain* is using the tension as a stand-in for
+        something else (a latency, a dead zone, direction-dependent friction).
+
+        The profile is one coefficient times a positive mixture (the shape on the grid): with
+        a free coefficient for each part, the two nearly collinear columns take opposite signs
+        as soon as a second effect leaves residual for their difference to fit (an unphysical
+        negative stretch of one part), in the low-wrap configurations first."""
         gain = float(np.sign(np.cov(ident.u, ident.y)[0, 1])) or 1.0
         return bool(np.all(gain * np.asarray(coef) <= 0.0))
 
-    def grid(self, ident: RunData) -> list[float]:
-        return [0.1, 0.2, 0.35, 0.5, 0.75, 1.0]
+    def grid(self, ident: RunData) -> list[Any]:
+        # (R, w): friction path R (fraction of the ln T_in span), share w of the tendon at the
+        # input tension; w is refined between its grid neighbours.
+        return [(r, w) for r in (0.1, 0.2, 0.35, 0.5, 0.75, 1.0) for w in (0.0, 0.5, 1.0)]
 
     def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+        self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx
     ) -> FloatArray:
         if run.tension is None:
             raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
+        big_r, w = theta
         lt = np.log(np.maximum(run.tension, ctx["t_floor"]))
         near = np.exp(2.0 * lt)
         path = np.zeros(run.n)
-        for r in np.linspace(0.0, theta * ctx["log_span"], self.n_profile):
+        for r in np.linspace(0.0, big_r * ctx["log_span"], self.n_profile):
             # Tension at one point of the friction path (capstan: a play in log tension).
             p = np.exp(2.0 * play(lt, float(r), z0=float(lt[0])))
             path += p - p[0]
-        scale = ctx["tension_scale"]
-        return np.column_stack([(near - near[0]) / scale, path / (self.n_profile * scale)])
+        profile = w * (near - near[0]) + (1.0 - w) * path / self.n_profile
+        return np.asarray(profile[:, None] / ctx["tension_scale"], dtype=np.float64)
 
     def context(self, ident: RunData) -> Ctx:
         t = ident.tension if ident.tension is not None else np.ones(2)

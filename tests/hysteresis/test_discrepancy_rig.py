@@ -125,13 +125,16 @@ def test_tendon_elongation_of_a_polymer_tendon_is_named_where_the_tension_is_hig
 
 def test_without_physical_evidence_weak_friction_asymmetry_is_misnamed():
     # The ablation that motivates the evidence: judged on the output fit alone, a tension
-    # shaped term (tendon_elongation, with a coefficient of the unphysical sign in one
-    # configuration) edges out the direction-dependent friction the load cells show.
+    # shaped term (tendon_elongation: the input tension carries the direction-dependent
+    # friction) edges out the direction-dependent friction the load cells show.
     fit_only = report({"asymmetry": 1.0}, settings=WorkflowSettings(physical_evidence=False))
     assert first(fit_only)["name"] == "tendon_elongation"
     with_evidence = report({"asymmetry": 1.0})
     assert first(with_evidence)["name"] == "asymmetry"
-    assert ranked(with_evidence, "tendon_elongation")["physical_sign"] is False
+    assert first(with_evidence)["evidence"]["friction_evidence"]["corroborated"] is True
+    # ... although the stretch fits the output better: the measured friction goes first
+    assert (ranked(with_evidence, "tendon_elongation")["delta_bic"]
+            < ranked(with_evidence, "asymmetry")["delta_bic"])
 
 
 def test_dead_zone_is_within_reach_of_play_operators_with_an_offset():
@@ -170,7 +173,11 @@ def test_interacting_effects_are_found_as_a_pair():
     # delay, speed law or time constant is searched again with the dead zone in place)
     {"dead_zone": 1.0, "drift": 2.0},
     {"dead_zone": 1.0, "rate_dependence": 1.0},
-])
+    # found only with one compliance coefficient (two per-part coefficients took opposite
+    # signs next to a second effect and the sign check rejected a real stretch)
+    {"asymmetry": 2.0, "tendon_elongation": 8.0},
+    {"dead_zone": 1.0, "tendon_elongation": 8.0},
+], ids=lambda e: "+".join(e))
 def test_two_hidden_effects_are_both_named(effects):
     rep = report(effects)
     names = [e["name"] for e in rep["effects"]]
