@@ -603,8 +603,9 @@ def retune(base_factory: BaseFactory, model: ComposedModel, ident: RunData, *,
     terms = list(model.terms)
     best, best_sse = model, _sse(model, ident)
     moved_any = False
-    for j in [*range(len(terms) - 1), len(terms) - 1]:
-        if not terms[j].effect.has_theta or (j == len(terms) - 1 and not moved_any):
+    for j in range(len(terms)):
+        newest = j == len(terms) - 1
+        if not terms[j].effect.has_theta or (newest and not moved_any):
             continue
         others = terms[:j] + terms[j + 1:]
         trial = fit_with_effect(base_factory, others, terms[j].effect, ident,
