@@ -109,6 +109,12 @@ def effective_n(residual: FloatArray) -> float:
     return float(max(n / max(tau, 1), 2.0))
 
 
+def delta_bic(rmse_before: float, rmse_after: float, k: int, n_eff: float) -> float:
+    """BIC change of a model with ``k`` more parameters: n_eff ln(MSE ratio) + k ln(n_eff)."""
+    ratio = max(rmse_after, 1e-300) ** 2 / max(rmse_before, 1e-300) ** 2
+    return n_eff * float(np.log(ratio)) + k * float(np.log(n_eff))
+
+
 def _rmse(e: FloatArray) -> float:
     return float(np.sqrt(np.mean(e**2)))
 
@@ -161,7 +167,7 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
     e_id1, e_h1 = after.errors(groups)
     h0, h1 = _rmse(e_h0), _rmse(e_h1)
     k = effect.n_params * len(groups)
-    d_bic = n_eff * float(np.log(max(h1, 1e-300) ** 2 / max(h0, 1e-300) ** 2)) + k * np.log(n_eff)
+    d_bic = delta_bic(h0, h1, k, n_eff)
     r0, r1 = before.per_run_rmse(groups), after.per_run_rmse(groups)
     improved = float(np.mean([r1[k_] < r0[k_] for k_ in r0]))
     # SINDy-style evidence: how much of the held-out residual the term's contribution explains.
@@ -243,8 +249,7 @@ def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: 
             continue
         h1 = s2["heldout_rmse_after"]
         k = a["n_params"] + s2["n_params"]
-        d_bic = (n_eff * float(np.log(max(h1, 1e-300) ** 2 / max(h0, 1e-300) ** 2))
-                 + k * float(np.log(n_eff)))
+        d_bic = delta_bic(h0, h1, k, n_eff)
         r1 = s2["after"].per_run_rmse(groups)
         gain = 1.0 - h1 / h0 if h0 > 0 else 0.0
         joint = {"names": [a["name"], b["name"]], "relative_gain": gain, "delta_bic": d_bic,
