@@ -16,7 +16,7 @@ joint fit. :class:`ComposedModel` is base family + terms, fitted jointly by back
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -48,6 +48,15 @@ class Effect:
     has_theta: bool = False
     #: Number of nonlinear parameters in ``theta`` (a float, or a tuple when more than one).
     n_theta: int = 1
+    #: The term changes the follower's motion itself (it happens inside the mechanism, so an
+    #: end-of-stroke stop clips it), rather than offsetting the reading of the output.
+    before_stop: bool = False
+    #: The term is a latency of the whole record (see :meth:`delayed`).
+    delays_run: bool = False
+
+    def delayed(self, run: RunData, theta: Any) -> RunData:
+        """The run with its input-side channels late by the term's parameter."""
+        return run
 
     def available(self, run: RunData) -> bool:
         return True
@@ -71,8 +80,12 @@ class Effect:
         return u
 
     def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx, *,
+        friction: FloatArray | None = None,
     ) -> FloatArray:
+        """Output-side feature columns. ``y_base``: the prediction the term acts on;
+        ``friction``: the operator terms' friction factor over time (None: constant), for
+        terms whose shape follows the friction along the tendon."""
         return np.empty((run.n, 0))
 
     def sign_ok(self, ident: RunData, coef: FloatArray) -> bool | None:
@@ -159,6 +172,7 @@ class TendonElongation(Effect):
     n_linear = 1
     has_theta = True
     n_theta = 2
+    before_stop = True
     #: Play thresholds averaged over the friction path (the profile's quadrature).
     n_profile = 8
 
@@ -184,7 +198,8 @@ class TendonElongation(Effect):
         return [(r, w) for r in (0.1, 0.2, 0.35, 0.5, 0.75, 1.0) for w in (0.0, 0.5, 1.0)]
 
     def features(
-        self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx
+        self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx, *,
+        friction: FloatArray | None = None,
     ) -> FloatArray:
         if run.tension is None:
             raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
@@ -193,8 +208,13 @@ class TendonElongation(Effect):
         near = np.exp(2.0 * lt)
         path = np.zeros(run.n)
         for r in np.linspace(0.0, big_r * ctx["log_span"], self.n_profile):
-            # Tension at one point of the friction path (capstan: a play in log tension).
-            p = np.exp(2.0 * play(lt, float(r), z0=float(lt[0])))
+            # Tension at one point of the friction path (capstan: a play in log tension). A
+            # speed law scales the friction all along the tendon, so the path with it.
+            if friction is None:
+                lp = play(lt, float(r), z0=float(lt[0]))
+            else:
+                lp = scaled_play(lt, float(r) * friction, z0=float(lt[0]))
+            p = np.exp(2.0 * lp)
             path += p - p[0]
         profile = w * (near - near[0]) + (1.0 - w) * path / self.n_profile
         return np.asarray(profile[:, None] / ctx["tension_scale"], dtype=np.float64)
@@ -214,9 +234,11 @@ class TimeDelay(Effect):
         "latency of the output: residual cross-correlates with the input velocity at a non-zero "
         "lag, concentrated where the output moves fastest"
     )
-    term = "y(t) = base(u(t - tau)), tau >= 0"
+    term = ("y(t) = M(t - tau), tau >= 0: the whole model M sees the record tau late (the "
+            "input, and the tensions and speed its other terms read)")
     side = "input"
     has_theta = True
+    delays_run = True
 
     def grid(self, ident: RunData) -> list[float]:
         dt = ident.dt
@@ -224,6 +246,15 @@ class TimeDelay(Effect):
 
     def transform_input(self, run: RunData, u: FloatArray, theta: float, ctx: Ctx) -> FloatArray:
         return shift(run.t, u, theta)
+
+    def delayed(self, run: RunData, theta: Any) -> RunData:
+        """The output is read late, so the model must see every channel it uses equally late:
+        the input, and the tensions behind a friction or elongation term."""
+        def late(x: FloatArray | None) -> FloatArray | None:
+            return None if x is None else shift(run.t, x, float(theta))
+
+        return replace(run, u=shift(run.t, run.u, float(theta)), tension=late(run.tension),
+                       tension_out=late(run.tension_out))
 
 
 class Drift(Effect):
@@ -241,7 +272,8 @@ class Drift(Effect):
         return [f * dur for f in (0.05, 0.1, 0.25, 0.5, 1.0, 1.5, 3.0, 10.0)]
 
     def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx, *,
+        friction: FloatArray | None = None,
     ) -> FloatArray:
         return (1.0 - np.exp(-run.ts / theta))[:, None]
 
@@ -254,9 +286,11 @@ class Asymmetry(Effect):
     )
     term = "c * m(t), m = 0 before the first motion, 1 after (a loop-centre shift born at once)"
     n_linear = 1
+    before_stop = True
 
     def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx, *,
+        friction: FloatArray | None = None,
     ) -> FloatArray:
         return np.abs(run.s)[:, None]
 
@@ -277,7 +311,8 @@ class Saturation(Effect):
         return [0.5, 0.7, 0.8, 0.9, 0.95, 1.0]
 
     def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx
+        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx, *,
+        friction: FloatArray | None = None,
     ) -> FloatArray:
         hi = ctx["centre"] + theta * ctx["half"]
         lo = ctx["centre"] - theta * ctx["half"]
@@ -372,7 +407,8 @@ class ComposedModel:
     def _input(self, run: RunData) -> FloatArray:
         u = run.u
         for term in self.terms:
-            if term.effect.side == "input" and not self._on_operators(term):
+            if (term.effect.side == "input" and not self._on_operators(term)
+                    and not term.effect.delays_run):
                 u = term.effect.transform_input(run, u, term.theta, term.context)
         return u
 
@@ -392,10 +428,9 @@ class ComposedModel:
         operator terms' friction factors.
         """
         u = self._input(run)
-        f = np.ones(run.n)
-        for term in self.terms:
-            if self._on_operators(term):
-                f = f * term.effect.scale(run, term.theta)
+        f = self._friction(run)
+        if f is None:
+            f = np.ones(run.n)
         p = _gamma_thresholds(base)
         u0 = float(u[0])
         cols = []
@@ -408,6 +443,15 @@ class ComposedModel:
             a = np.column_stack([a, np.ones(run.n)])
         return a
 
+    def _friction(self, run: RunData) -> FloatArray | None:
+        """Product of the operator terms' friction factors (None: no such term)."""
+        f = None
+        for term in self.terms:
+            if self._on_operators(term):
+                s = term.effect.scale(run, term.theta)
+                f = s if f is None else f * s
+        return f
+
     def _fit_operators(self, run: RunData) -> ComposedModel:
         """Exact (constrained) least squares of the speed-scaled Gamma and the features."""
         from hysteresis.gamma import constrained_lstsq
@@ -418,8 +462,9 @@ class ComposedModel:
         uses_base = any(t.effect.uses_base for t in self.terms if t.effect.n_linear > 0)
         yb = run.y
         x = np.zeros(a.shape[1])
+        coef: FloatArray | None = None  # no estimate before the first solve
         for _ in range(self.iterations if uses_base else 1):
-            phi = self._features(run, yb)
+            phi = self._features(run, yb, coef)
             full = np.column_stack([a, phi])
             if getattr(base, "constraint", "free") == "sum_to_one":
                 c = np.zeros(full.shape[1])
@@ -428,17 +473,46 @@ class ComposedModel:
             else:
                 x = _lstsq(full, run.y)
             yb = a @ x[: a.shape[1]]
+            coef = x[a.shape[1]:]
         self.base_ = base
         self.op_weights_ = np.asarray(x[: a.shape[1]], dtype=np.float64)
         self.coef_ = np.asarray(x[a.shape[1]:], dtype=np.float64)
         return self
 
-    def _features(self, run: RunData, y_base: FloatArray) -> FloatArray:
-        cols = [t.effect.features(run, t.theta, y_base, t.context)
-                for t in self.terms if t.effect.n_linear > 0]
-        return np.hstack(cols) if cols else np.empty((run.n, 0))
+    def _features(self, run: RunData, y_base: FloatArray,
+                  coef: FloatArray | None = None) -> FloatArray:
+        """The output terms' feature columns, in term order. A term that reads the base's
+        prediction (a stop) reads the follower's motion: the base plus the contributions of
+        the terms that act inside the mechanism (``before_stop``, weighted by ``coef``, the
+        current estimate of all coefficients; None: not known yet)."""
+        out = [t for t in self.terms if t.effect.n_linear > 0]
+        f = self._friction(run)
+        cols: dict[int, FloatArray] = {}
+        motion = y_base
+        start = 0
+        for i, t in enumerate(out):
+            n = t.effect.n_linear
+            if not t.effect.uses_base:
+                cols[i] = t.effect.features(run, t.theta, y_base, t.context, friction=f)
+                if coef is not None and t.effect.before_stop:
+                    motion = motion + cols[i] @ coef[start:start + n]
+            start += n
+        for i, t in enumerate(out):
+            if t.effect.uses_base:
+                cols[i] = t.effect.features(run, t.theta, motion, t.context, friction=f)
+        return np.hstack([cols[i] for i in range(len(out))]) if out else np.empty((run.n, 0))
+
+    def _seen(self, run: RunData) -> RunData:
+        """The run as the model sees it: a latency delays every channel it reads (the
+        input, the tensions, the speed and direction derived from them), not only the input
+        of the base; the measured output stays as it is."""
+        for term in self.terms:
+            if term.effect.delays_run:
+                run = term.effect.delayed(run, term.theta)
+        return run
 
     def fit(self, run: RunData) -> ComposedModel:
+        run = self._seen(run)
         if any(self._on_operators(t) for t in self.terms):
             return self._fit_operators(run)
         u = self._input(run)
@@ -457,18 +531,20 @@ class ComposedModel:
         coef = np.zeros(0)
         if out_terms:
             prev = np.inf
+            known: FloatArray | None = None
             for _ in range(self.iterations):
-                phi = self._features(run, yb)
+                phi = self._features(run, yb, known)
                 coef = _lstsq(phi, y - yb)
                 g = phi @ coef
                 base = self.base_factory()
                 base.fit(u, y - g)
                 yb = base.predict(u)
-                sse = float(np.sum((y - yb - self._features(run, yb) @ coef) ** 2))
+                sse = float(np.sum((y - yb - self._features(run, yb, coef) @ coef) ** 2))
+                known = coef
                 if np.isfinite(prev) and prev - sse <= self.tol * prev:
                     break
                 prev = sse
-            phi = self._features(run, yb)
+            phi = self._features(run, yb, known)
             coef = _lstsq(phi, y - yb)
         self.base_ = base
         self.coef_ = np.asarray(coef, dtype=np.float64)
@@ -477,15 +553,16 @@ class ComposedModel:
     def predict(self, run: RunData) -> FloatArray:
         if not hasattr(self, "base_"):
             raise HysteresisError("ComposedModel is not fitted yet; call fit(run) first")
+        run = self._seen(run)
         if hasattr(self, "op_weights_"):
             yo = self._scaled_design(run, self.base_) @ self.op_weights_
             if self.coef_.size:
-                yo = yo + self._features(run, yo) @ self.coef_
+                yo = yo + self._features(run, yo, self.coef_) @ self.coef_
             return np.asarray(yo, dtype=np.float64)
         u = self._input(run)
         yb = self.base_.predict(u)
         if self.coef_.size:
-            yb = yb + self._features(run, yb) @ self.coef_
+            yb = yb + self._features(run, yb, self.coef_) @ self.coef_
         return np.asarray(yb, dtype=np.float64)
 
     @property
@@ -617,3 +694,4 @@ def retune(base_factory: BaseFactory, model: ComposedModel, ident: RunData, *,
             best, best_sse, terms = cand, sse, list(cand.terms)
             moved_any = True
     return best
+

@@ -296,6 +296,89 @@ def test_retune_searches_earlier_terms_again_with_the_newest_in_place():
     assert retune(f, m1, r) is m1
 
 
+def _tension_probe():
+    t, u = sine_decay()
+    tension = 4.0 + 2.0 * np.abs(u) + 0.5 * u  # pulling raises the input tension
+    return RunData(run_id="p", t=t, u=u, y=u, tension=tension)
+
+
+def test_elongation_profile_follows_the_friction_of_the_speed_law():
+    # Under capstan friction the tension profile runs over mu x wrap in log tension; a speed
+    # law that doubles the friction doubles that path: a constant factor 2 on the profile's
+    # thresholds is the same term with R doubled.
+    probe = _tension_probe()
+    eff = candidate("tendon_elongation")
+    ctx = eff.context(probe)
+    f0 = eff.features(probe, (0.35, 0.5), probe.y, ctx)
+    assert np.allclose(eff.features(probe, (0.35, 0.5), probe.y, ctx,
+                                    friction=np.ones(probe.n)), f0)
+    assert np.allclose(eff.features(probe, (0.35, 0.5), probe.y, ctx,
+                                    friction=np.full(probe.n, 2.0)),
+                       eff.features(probe, (0.7, 0.5), probe.y, ctx))
+    assert not np.allclose(f0, eff.features(probe, (0.7, 0.5), probe.y, ctx))
+    # the composed model hands the operator terms' friction factor to the profile
+    rate = candidate("rate_dependence")
+    gamma = lambda: make_family("gamma", thresholds=[0.0, 0.6, 2.0])  # noqa: E731
+    theta = rate.operator_grid(probe)[5]
+    m = ComposedModel(gamma, [Term(rate, theta), Term(eff, (0.35, 0.5), tuple(ctx.items()))])
+    expect = eff.features(probe, (0.35, 0.5), probe.y, ctx, friction=rate.scale(probe, theta))
+    assert np.allclose(m._features(probe, probe.y), expect)
+
+
+def test_a_stop_clips_the_motion_the_mechanism_terms_shape():
+    # The follower's stop limits its motion, and a tendon's stretch is part of that motion:
+    # y = min(base - stretch, cap), not min(base, cap) - stretch. The saturation term reads
+    # the base plus the terms that act inside the mechanism (``before_stop``).
+    probe = _tension_probe()
+    eff = candidate("tendon_elongation")
+    ctx = eff.context(probe)
+    stretch = eff.features(probe, (0.35, 1.0), probe.y, ctx)[:, 0]
+    free = plant(probe.u) - 2.0 * stretch
+    cap = float(np.percentile(free, 90))
+    r = RunData(run_id="stop", t=probe.t, u=probe.u, y=np.minimum(free, cap),
+                tension=probe.tension)
+    f = lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))  # noqa: E731
+    sse = lambda m: float(np.sum((r.y - m.predict(r)) ** 2))  # noqa: E731
+    inside = fit_with_effect(f, fit_with_effect(f, [], eff, r).terms, candidate("saturation"), r)
+    assert [t.effect.name for t in inside.terms] == ["tendon_elongation", "saturation"]
+    assert sse(inside) < 1e-3 * float(np.sum((r.y - r.y.mean()) ** 2))
+    eff.before_stop = False  # the old composition: the stretch added after the stop
+    try:
+        outside = fit_with_effect(f, fit_with_effect(f, [], eff, r).terms,
+                                  candidate("saturation"), r)
+    finally:
+        eff.before_stop = True
+    assert sse(inside) < 0.2 * sse(outside)
+
+
+def test_a_latency_delays_every_channel_the_model_reads():
+    # The output is read late, so the stretch (driven by the measured tension) is late too:
+    # y(t) = [base(u) - c T^2](t - tau). The delay term shifts the tension with the input.
+    probe = _tension_probe()
+    eff = candidate("tendon_elongation")
+    ctx = eff.context(probe)
+    tau = 0.12
+    stretch = eff.features(probe, (0.35, 1.0), probe.y, ctx)[:, 0]
+    y = shift(probe.t, plant(probe.u) - 0.5 * stretch, tau)
+    r = RunData(run_id="late", t=probe.t, u=probe.u, y=y, tension=probe.tension)
+    f = lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))  # noqa: E731
+    delay = candidate("time_delay")
+    m = ComposedModel(f, [Term(delay, tau)])
+    seen = m._seen(r)
+    assert np.allclose(seen.u, shift(r.t, r.u, tau)) and seen.y is r.y
+    assert np.allclose(seen.tension, shift(r.t, r.tension, tau))
+    sse = lambda m: float(np.sum((r.y - m.predict(r)) ** 2))  # noqa: E731
+    both = fit_with_effect(f, [Term(delay, tau)], eff, r)
+    assert both.coef_[0] == pytest.approx(-0.5, rel=0.02)
+    assert sse(both) < 1e-4 * float(np.sum((r.y - r.y.mean()) ** 2))
+    delay.delays_run = False  # the old form: only the base's input is late
+    try:
+        input_only = fit_with_effect(f, [Term(delay, tau)], eff, r)
+    finally:
+        delay.delays_run = True
+    assert sse(both) < 0.1 * sse(input_only)
+
+
 # -- bookkeeping ---------------------------------------------------------------------------
 
 def test_group_runs_and_concatenated_identification():

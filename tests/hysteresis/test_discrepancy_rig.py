@@ -197,3 +197,4 @@ def test_a_frozen_earlier_term_hides_the_second_effect():
     assert [e["name"] for e in frozen["effects"]] == ["rate_dependence"]
     joint = report({"dead_zone": 1.0, "rate_dependence": 1.0})
     assert joint["summary"]["heldout_rmse_after"] < 0.8 * frozen["summary"]["heldout_rmse_after"]
+
