@@ -695,3 +695,29 @@ def retune(base_factory: BaseFactory, model: ComposedModel, ident: RunData, *,
             moved_any = True
     return best
 
+
+def fit_joint(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect, ident: RunData,
+              *, iterations: int = 8) -> ComposedModel:
+    """``effect`` added to the ``fixed`` terms with every nonlinear parameter searched again,
+    from two starting points; the better on the identification SSE.
+
+    :func:`retune` is a coordinate search, and where two terms can trade one effect between
+    them (a delay and a dead zone both hold the output back after a reversal) it stays in the
+    basin of the order the terms came in: the earlier term keeps the share it took alone. So the
+    candidate is also fitted *first*, the earlier terms are searched again on top of it, and the
+    two joint fits compete on the identification run. The terms keep their order (the newest
+    last), which the composed model does not depend on.
+    """
+    on_top = retune(base_factory, fit_with_effect(base_factory, fixed, effect, ident,
+                                                  iterations=iterations), ident,
+                    iterations=iterations)
+    if not fixed:
+        return on_top
+    first = fit_with_effect(base_factory, [], effect, ident, iterations=iterations)
+    for term in fixed:
+        first = fit_with_effect(base_factory, first.terms, term.effect, ident,
+                                iterations=iterations)
+    first = retune(base_factory, first, ident, iterations=iterations)
+    reordered = ComposedModel(base_factory, [*first.terms[1:], first.terms[0]],
+                              iterations=iterations).fit(ident)
+    return reordered if _sse(reordered, ident) < _sse(on_top, ident) else on_top

@@ -11,7 +11,7 @@ configuration's held-out runs. Each round:
 3. **add**: the winner (if it clears the gain and BIC thresholds and improves most held-out
    runs) joins the model, keeping its parameters per configuration; every candidate is scored
    after a joint refit, in which the earlier terms' nonlinear parameters are searched again
-   with the candidate in place (:func:`.effects.retune`);
+   with the candidate in place, from two starting points (:func:`.effects.fit_joint`);
 4. **show**: RMSE before/after on identification and held-out runs, recorded per effect.
 """
 
@@ -33,8 +33,8 @@ from hysteresis.discrepancy.effects import (
     ComposedModel,
     Effect,
     Term,
+    fit_joint,
     fit_with_effect,
-    retune,
 )
 from hysteresis.discrepancy.friction import corroboration
 from hysteresis.discrepancy.locate import autocorrelation, locate
@@ -63,8 +63,9 @@ class WorkflowSettings:
     #: (the base bends to one and hides the other) are added together when the pair removes
     #: at least ``min_relative_gain`` more than its better member alone.
     pair_search: bool = True
-    #: Search the earlier terms' nonlinear parameters again with each candidate in place
-    #: (False: they stay where they were chosen, only the linear parameters are refitted).
+    #: Search the earlier terms' nonlinear parameters again with each candidate in place, from
+    #: two starting points (:func:`.effects.fit_joint`; False: they stay where they were
+    #: chosen, only the linear parameters are refitted).
     joint_retune: bool = True
     progress: bool = False
 
@@ -157,11 +158,12 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
     """Add ``effect`` to every configuration's model, refit, and measure what it removes;
     for a friction hypothesis, also read the load cells for the change it claims
     (``friction``: that reading when already made, it does not depend on the model).
-    ``joint_retune``: search the earlier terms' nonlinear parameters again (:func:`retune`)."""
+    ``joint_retune``: search the earlier terms' nonlinear parameters again (:func:`fit_joint`)."""
     models = {}
     for g in groups:
-        m = fit_with_effect(base_factory, terms.get(g.key, []), effect, g.ident)
-        models[g.key] = retune(base_factory, m, g.ident) if joint_retune else m
+        fixed = terms.get(g.key, [])
+        models[g.key] = (fit_joint(base_factory, fixed, effect, g.ident) if joint_retune
+                         else fit_with_effect(base_factory, fixed, effect, g.ident))
     after = evaluate(models, groups)
     e_id0, e_h0 = before.errors(groups)
     e_id1, e_h1 = after.errors(groups)

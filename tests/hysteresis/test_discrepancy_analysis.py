@@ -20,6 +20,7 @@ from hysteresis.discrepancy.effects import (
     ComposedModel,
     Term,
     candidate,
+    fit_joint,
     fit_with_effect,
     retune,
 )
@@ -377,6 +378,22 @@ def test_a_latency_delays_every_channel_the_model_reads():
     finally:
         delay.delays_run = True
     assert sse(both) < 0.1 * sse(input_only)
+
+
+def test_fit_joint_keeps_the_better_of_two_orders():
+    # With nothing earlier, fit_joint is the plain fit; with an earlier term, the candidate
+    # comes back last and the identification SSE is never worse than adding it on top.
+    f = lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))  # noqa: E731
+    r = run(y=lambda t, u: shift(t, 0.9 * play(u, 0.25, z0=0.0) + 0.1, 0.12))
+    alone = fit_joint(f, [], candidate("dead_zone"), r)
+    assert alone.terms[0].theta == fit_with_effect(f, [], candidate("dead_zone"), r).terms[0].theta
+    m1 = fit_with_effect(f, [], candidate("time_delay"), r)
+    joint = fit_joint(f, m1.terms, candidate("dead_zone"), r)
+    on_top = retune(f, fit_with_effect(f, m1.terms, candidate("dead_zone"), r), r)
+    assert [t.effect.name for t in joint.terms] == ["time_delay", "dead_zone"]
+    sse = lambda m: float(np.sum((r.y - m.predict(r)) ** 2))  # noqa: E731
+    assert sse(joint) <= sse(on_top)
+    assert joint.terms[0].theta == pytest.approx(0.12, abs=0.002)
 
 
 # -- bookkeeping ---------------------------------------------------------------------------
