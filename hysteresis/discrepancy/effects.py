@@ -51,11 +51,9 @@ class Effect:
     #: The term changes the follower's motion itself (it happens inside the mechanism, so an
     #: end-of-stroke stop clips it), rather than offsetting the reading of the output.
     before_stop: bool = False
-    #: The term is a latency of the whole record (see :meth:`delayed`).
-    delays_run: bool = False
-
     def delayed(self, run: RunData, theta: Any) -> RunData:
-        """The run with its input-side channels late by the term's parameter."""
+        """The run as the model sees it with this term: channels made late by a latency
+        (identity for every other term)."""
         return run
 
     def available(self, run: RunData) -> bool:
@@ -238,14 +236,10 @@ class TimeDelay(Effect):
             "input, and the tensions and speed its other terms read)")
     side = "input"
     has_theta = True
-    delays_run = True
 
     def grid(self, ident: RunData) -> list[float]:
         dt = ident.dt
         return [k * dt for k in (1, 2, 3, 5, 8, 12, 18, 27, 40) if k * dt <= 0.5]
-
-    def transform_input(self, run: RunData, u: FloatArray, theta: float, ctx: Ctx) -> FloatArray:
-        return shift(run.t, u, theta)
 
     def delayed(self, run: RunData, theta: Any) -> RunData:
         """The output is read late, so the model must see every channel it uses equally late:
@@ -407,8 +401,7 @@ class ComposedModel:
     def _input(self, run: RunData) -> FloatArray:
         u = run.u
         for term in self.terms:
-            if (term.effect.side == "input" and not self._on_operators(term)
-                    and not term.effect.delays_run):
+            if term.effect.side == "input" and not self._on_operators(term):
                 u = term.effect.transform_input(run, u, term.theta, term.context)
         return u
 
@@ -507,8 +500,7 @@ class ComposedModel:
         input, the tensions, the speed and direction derived from them), not only the input
         of the base; the measured output stays as it is."""
         for term in self.terms:
-            if term.effect.delays_run:
-                run = term.effect.delayed(run, term.theta)
+            run = term.effect.delayed(run, term.theta)
         return run
 
     def fit(self, run: RunData) -> ComposedModel:

@@ -301,7 +301,8 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
         grid = eff.grid(ident)
         theta = grid[len(grid) // 2]
         ctx = eff.context(ident)
-        u = eff.transform_input(ident, ident.u, theta, ctx) if eff.side == "input" else ident.u
+        seen = eff.delayed(ident, theta)  # the same path as the composed model's input
+        u = eff.transform_input(seen, seen.u, theta, ctx) if eff.side == "input" else ident.u
         y_syn = base.predict(u)
         if eff.n_linear:
             phi = eff.features(ident, theta, y_syn, ctx)
