@@ -23,7 +23,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from hysteresis.base import HysteresisError, HysteresisModel
-from hysteresis.discrepancy._ops import FloatArray, play, scaled_play, shift, velocity
+from hysteresis.discrepancy._ops import FloatArray, play, scaled_play, shift
 from hysteresis.discrepancy.runs import RunData
 
 EFFECT_NAMES = (
@@ -149,9 +149,15 @@ class RateDependence(Effect):
 
 
 def speed(run: RunData) -> FloatArray:
-    """Input speed for the friction law: the decimation's moving average already smooths the
-    servo's 10 ms set-point steps, so only one sample of extra smoothing (a short window)."""
-    return velocity(run.t, run.u, window_s=0.5 * run.dt)
+    """Input speed for the friction law, causal: the speed the contact has been sliding at over
+    the last sample (a backward difference; friction remembers past sliding, it does not see
+    the next sample). The decimation's moving average already smooths the servo's steps."""
+    if run.n < 2:
+        return np.zeros(run.n)
+    v = np.empty(run.n)
+    v[1:] = np.diff(run.u) / np.diff(run.t)
+    v[0] = v[1]
+    return v
 
 
 class TendonElongation(Effect):

@@ -25,6 +25,7 @@ from hysteresis.discrepancy.effects import (
     fit_joint,
     fit_with_effect,
     retune,
+    speed,
 )
 from hysteresis.discrepancy.runs import RunData, concat_runs
 from hysteresis.discrepancy.workflow import effective_n, group_runs
@@ -269,6 +270,21 @@ def test_rate_dependence_scales_a_gamma_bases_play_operators():
     assert np.sqrt(np.mean((r.y - m.predict(r)) ** 2)) < 0.01 * np.std(r.y)
     clean = ComposedModel(gamma).fit(r)
     assert np.sqrt(np.mean((r.y - clean.predict(r)) ** 2)) > 0.05
+
+
+def test_the_speed_law_reads_the_speed_the_contact_has_been_sliding_at():
+    # Friction follows past sliding (frictional memory); it cannot see the next sample. A ramp
+    # that starts at sample 10: the factor is 1 up to sample 10 and rises from sample 11 on,
+    # and changing the future leaves the past's factor unchanged.
+    t = np.arange(40) * 0.05
+    u = np.where(np.arange(40) > 10, (np.arange(40) - 10) * 0.3, 0.0)
+    r = RunData(run_id="ramp", t=t, u=u, y=u)
+    eff = candidate("rate_dependence")
+    f = eff.scale(r, (1.0, 5.0, 0.5))
+    assert np.all(f[:11] == 1.0) and np.all(f[11:] > 1.0)
+    assert speed(r)[11:] == pytest.approx(6.0)
+    late = replace(r, u=np.where(np.arange(40) > 20, u[20], u))
+    assert np.array_equal(eff.scale(late, (1.0, 5.0, 0.5))[:21], f[:21])
 
 
 def test_composed_model_stacks_terms_and_refits_jointly():
