@@ -103,8 +103,7 @@ def study_case(effect: str | None, strength: float, pair: str,
         "correct": (named[:1] == [effect]) if effect else not named,
         "seconds": round(time.perf_counter() - t0, 2),
         "ranking": [{k: s[k] for k in ("name", "relative_gain", "delta_bic")}
-                    | {"friction_corroborated": s["friction_evidence"]["corroborated"],
-                       "physical_sign": s["physical_sign"]}
+                    | {"friction_corroborated": s["friction_evidence"]["corroborated"]}
                     for s in (rep["rankings"][0] if rep["rankings"] else [])],
     }
     if named:

@@ -4,9 +4,9 @@ Each candidate states the signature it leaves in the base model's residual and o
 term that composes with any base family:
 
 * an *input-side* term transforms the input before the base sees it (``time_delay``,
-  ``dead_zone``): the base is refitted on the transformed input;
+  ``dead_zone``, ``tendon_elongation``): the base is refitted on the transformed input;
 * an *output-side* term adds features whose coefficients are fitted jointly with the base
-  (``rate_dependence``, ``tendon_elongation``, ``drift``, ``asymmetry``, ``saturation``).
+  (``rate_dependence`` on non-Gamma bases, ``drift``, ``asymmetry``, ``saturation``).
 
 Terms with a nonlinear parameter ``theta`` (a delay, a width, a knee) are searched on a grid
 that is scaled to the identification run, then refined; their linear coefficients come from the
@@ -51,6 +51,13 @@ class Effect:
     #: The term changes the follower's motion itself (it happens inside the mechanism, so an
     #: end-of-stroke stop clips it), rather than offsetting the reading of the output.
     before_stop: bool = False
+    #: Input-side terms apply in this order along the drive (0: at the actuator).
+    input_stage: int = 0
+    #: The last component of theta is refined from this many grid points (the best of each
+    #: of the best prefixes): where the other components set a shape, a coarse step of the
+    #: last one can rank the shapes wrongly.
+    refine_starts: int = 1
+
     def delayed(self, run: RunData, theta: Any) -> RunData:
         """The run as the model sees it with this term: channels made late by a latency
         (identity for every other term)."""
@@ -74,22 +81,15 @@ class Effect:
         g = [x for x in self.grid(ident) if np.isfinite(x)]
         return (min(g), max(g)) if g else None
 
-    def transform_input(self, run: RunData, u: FloatArray, theta: float, ctx: Ctx) -> FloatArray:
+    def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
+                        friction: FloatArray | None = None) -> FloatArray:
+        """Input-side terms: the input the base sees. ``friction``: the operator terms'
+        friction factor over time (None: constant)."""
         return u
 
-    def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx, *,
-        friction: FloatArray | None = None,
-    ) -> FloatArray:
-        """Output-side feature columns. ``y_base``: the prediction the term acts on;
-        ``friction``: the operator terms' friction factor over time (None: constant), for
-        terms whose shape follows the friction along the tendon."""
+    def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
+        """Output-side feature columns. ``y_base``: the prediction the term acts on."""
         return np.empty((run.n, 0))
-
-    def sign_ok(self, ident: RunData, coef: FloatArray) -> bool | None:
-        """Do the term's fitted coefficients have the sign its physics allows? (``None``: the
-        hypothesis allows either sign.)"""
-        return None
 
     #: Acts on a Gamma base's play operators (their widths scaled by :meth:`scale`) instead of
     #: transforming the input; with any other base the input-side form is used.
@@ -138,7 +138,8 @@ class RateDependence(Effect):
         return [(1.0, f * vmax, g) for f in (0.3, 0.5, 0.8, 1.2)
                 for g in (0.15, 0.3, 0.6, self.g_max)]
 
-    def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx) -> FloatArray:
+    def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
+                        friction: FloatArray | None = None) -> FloatArray:
         v0, c = theta
         return np.asarray(u - c * np.tanh(run.v / v0), dtype=np.float64)
 
@@ -164,50 +165,42 @@ class TendonElongation(Effect):
     name = "tendon_elongation"
     signature = (
         "extra load-dependent compliance: the tendon stretches by c T^2 per unit length, so the "
-        "output falls short by the integral of T^2 along the tendon; the shortfall follows the "
-        "tension profile (stiff at low tension, soft at high), not the sliding speed"
+        "tendon passes on less of the input travel the harder it is pulled; the shortfall "
+        "follows the tension profile (stiff at low tension, soft at high), not the sliding "
+        "speed, and it vanishes while friction holds the output"
     )
-    term = ("c [w (T_in^2 - T_in(0)^2) + (1 - w) mean_{r in [0, R]} (exp(2 play_r(ln T_in)) - "
-            "start)], c <= 0 (a shortfall): under capstan friction the tension at wrap angle "
-            "theta is exp(play_{mu theta}(ln T_in)), so the mean over thresholds spreads T^2 "
-            "along the friction path (R = mu x total wrap, a fraction of the identification "
-            "run's ln T_in range, on a grid); w, the share of tendon at the input tension (free "
-            "end, straight lead-in), on a grid and refined; one compliance coefficient c")
-    n_linear = 1
+    term = ("y = base(u - c s [w (T_in^2 - T_in(0)^2) + (1 - w) mean_{r in [0, R]} "
+            "(exp(2 play_r(ln T_in)) - start)]), c >= 0: the stretch eats input travel before "
+            "the friction of the sheath sees it, so while the plays hold the output the stretch "
+            "only delays it (s: the direction in which pulling moves the input). Under capstan "
+            "friction the tension at wrap angle theta is exp(play_{mu theta}(ln T_in)), so the "
+            "mean over thresholds spreads T^2 along the friction path (R = mu x total wrap, a "
+            "fraction of the identification run's ln T_in range); w, the share of tendon at the "
+            "input tension (free end, straight lead-in); (R, w, c) on a grid, c refined")
+    side = "input"
+    input_stage = 1  # the tendon, after the actuator's backlash
+    refine_starts = 3
     has_theta = True
-    n_theta = 2
-    before_stop = True
+    n_theta = 3
     #: Play thresholds averaged over the friction path (the profile's quadrature).
     n_profile = 8
 
     def available(self, run: RunData) -> bool:
         return run.tension is not None
 
-    def sign_ok(self, ident: RunData, coef: FloatArray) -> bool | None:
-        """Stretch under tension can only make the output fall short of the base's: the
-        compliance coefficient must pull against the direction in which pulling moves the
-        output. A fit that needs a tension-shaped *gain* is using the tension as a stand-in for
-        something else (a latency, a dead zone, direction-dependent friction).
-
-        The profile is one coefficient times a positive mixture (the shape on the grid): with
-        a free coefficient for each part, the two nearly collinear columns take opposite signs
-        as soon as a second effect leaves residual for their difference to fit (an unphysical
-        negative stretch of one part), in the low-wrap configurations first."""
-        gain = float(np.sign(np.cov(ident.u, ident.y)[0, 1])) or 1.0
-        return bool(np.all(gain * np.asarray(coef) <= 0.0))
-
     def grid(self, ident: RunData) -> list[Any]:
-        # (R, w): friction path R (fraction of the ln T_in span), share w of the tendon at the
-        # input tension; w is refined between its grid neighbours.
-        return [(r, w) for r in (0.1, 0.2, 0.35, 0.5, 0.75, 1.0) for w in (0.0, 0.5, 1.0)]
+        # (R, w, c): friction path R (fraction of the ln T_in span), share w of the tendon at
+        # the input tension (with w = 1 the path does not matter), stretch c at the largest
+        # tension (fraction of the input span; refined). c >= 0: a stretch can only shorten.
+        span = float(np.ptp(ident.u))
+        shapes = [(r, w) for r in (0.1, 0.35, 1.0) for w in (0.0, 0.5)] + [(0.1, 1.0)]
+        return [(r, w, c * span) for r, w in shapes for c in (0.03, 0.08, 0.17, 0.35, 0.7)]
 
-    def features(
-        self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx, *,
-        friction: FloatArray | None = None,
-    ) -> FloatArray:
+    def profile(self, run: RunData, big_r: float, w: float, ctx: Ctx, *,
+                friction: FloatArray | None = None) -> FloatArray:
+        """The tendon's T^2 profile, from 0 at the run's start, per unit of the largest T^2."""
         if run.tension is None:
             raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
-        big_r, w = theta
         lt = np.log(np.maximum(run.tension, ctx["t_floor"]))
         near = np.exp(2.0 * lt)
         path = np.zeros(run.n)
@@ -220,16 +213,24 @@ class TendonElongation(Effect):
                 lp = scaled_play(lt, float(r) * friction, z0=float(lt[0]))
             p = np.exp(2.0 * lp)
             path += p - p[0]
-        profile = w * (near - near[0]) + (1.0 - w) * path / self.n_profile
-        return np.asarray(profile[:, None] / ctx["tension_scale"], dtype=np.float64)
+        out = w * (near - near[0]) + (1.0 - w) * path / self.n_profile
+        return np.asarray(out / ctx["tension_scale"], dtype=np.float64)
+
+    def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
+                        friction: FloatArray | None = None) -> FloatArray:
+        big_r, w, c = theta
+        stretch = c * self.profile(run, big_r, w, ctx, friction=friction)
+        return np.asarray(u - ctx["pull_sign"] * stretch, dtype=np.float64)
 
     def context(self, ident: RunData) -> Ctx:
         t = ident.tension if ident.tension is not None else np.ones(2)
         # Floor for the log: a slack tendon reads ~0 N (load-cell noise may go negative).
         floor = max(0.02 * float(np.percentile(np.abs(t), 99)), 1e-6)
         lt = np.log(np.maximum(t, floor))
+        # Pulling is the direction of input travel that raises the input tension.
+        pull = float(np.sign(np.cov(ident.u, t)[0, 1])) if ident.tension is not None else 1.0
         return {"tension_scale": max(float(np.max(t**2)), 1e-12), "t_floor": floor,
-                "log_span": max(float(np.ptp(lt)), 1e-9)}
+                "log_span": max(float(np.ptp(lt)), 1e-9), "pull_sign": pull or 1.0}
 
 
 class TimeDelay(Effect):
@@ -271,11 +272,8 @@ class Drift(Effect):
         dur = float(np.max(ident.ts))  # the longest identification record
         return [f * dur for f in (0.05, 0.1, 0.25, 0.5, 1.0, 1.5, 3.0, 10.0)]
 
-    def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx, *,
-        friction: FloatArray | None = None,
-    ) -> FloatArray:
-        return (1.0 - np.exp(-run.ts / theta))[:, None]
+    def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
+        return np.asarray((1.0 - np.exp(-run.ts / float(theta)))[:, None], dtype=np.float64)
 
 
 class Asymmetry(Effect):
@@ -288,10 +286,7 @@ class Asymmetry(Effect):
     n_linear = 1
     before_stop = True
 
-    def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx, *,
-        friction: FloatArray | None = None,
-    ) -> FloatArray:
+    def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
         return np.abs(run.s)[:, None]
 
 
@@ -310,10 +305,7 @@ class Saturation(Effect):
     def grid(self, ident: RunData) -> list[float]:
         return [0.5, 0.7, 0.8, 0.9, 0.95, 1.0]
 
-    def features(
-        self, run: RunData, theta: float, y_base: FloatArray, ctx: Ctx, *,
-        friction: FloatArray | None = None,
-    ) -> FloatArray:
+    def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
         hi = ctx["centre"] + theta * ctx["half"]
         lo = ctx["centre"] - theta * ctx["half"]
         return np.column_stack([np.maximum(y_base - hi, 0.0), np.maximum(lo - y_base, 0.0)])
@@ -338,7 +330,8 @@ class DeadZone(Effect):
         span = float(np.ptp(ident.u))
         return [f * span for f in (0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15)]
 
-    def transform_input(self, run: RunData, u: FloatArray, theta: float, ctx: Ctx) -> FloatArray:
+    def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
+                        friction: FloatArray | None = None) -> FloatArray:
         return play(u, 0.5 * theta, z0=float(u[0]))
 
 
@@ -405,10 +398,14 @@ class ComposedModel:
         self._gamma: bool | None = None
 
     def _input(self, run: RunData) -> FloatArray:
+        """The input the base sees: the input-side terms in the order the mechanism applies
+        them (the carriage's backlash before the tendon's stretch), whatever order they joined
+        in."""
         u = run.u
-        for term in self.terms:
-            if term.effect.side == "input" and not self._on_operators(term):
-                u = term.effect.transform_input(run, u, term.theta, term.context)
+        inputs = [t for t in self.terms if t.effect.side == "input" and not self._on_operators(t)]
+        friction = self._friction(run) if inputs else None
+        for term in sorted(inputs, key=lambda t: t.effect.input_stage):
+            u = term.effect.transform_input(run, u, term.theta, term.context, friction=friction)
         return u
 
     def _on_operators(self, term: Term) -> bool:
@@ -485,20 +482,19 @@ class ComposedModel:
         the terms that act inside the mechanism (``before_stop``, weighted by ``coef``, the
         current estimate of all coefficients; None: not known yet)."""
         out = [t for t in self.terms if t.effect.n_linear > 0]
-        f = self._friction(run)
         cols: dict[int, FloatArray] = {}
         motion = y_base
         start = 0
         for i, t in enumerate(out):
             n = t.effect.n_linear
             if not t.effect.uses_base:
-                cols[i] = t.effect.features(run, t.theta, y_base, t.context, friction=f)
+                cols[i] = t.effect.features(run, t.theta, y_base, t.context)
                 if coef is not None and t.effect.before_stop:
                     motion = motion + cols[i] @ coef[start:start + n]
             start += n
         for i, t in enumerate(out):
             if t.effect.uses_base:
-                cols[i] = t.effect.features(run, t.theta, motion, t.context, friction=f)
+                cols[i] = t.effect.features(run, t.theta, motion, t.context)
         return np.hstack([cols[i] for i in range(len(out))]) if out else np.empty((run.n, 0))
 
     def _seen(self, run: RunData) -> RunData:
@@ -642,24 +638,37 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
     best = int(np.argmin(sses))
     model = fits[best]
     if refine and effect.has_theta and len(grid) > 1:
-        # Refine the last component of theta between its grid neighbours (others fixed).
-        th = grid[best]
-        prefix = th[:-1] if isinstance(th, tuple) else ()
-        line = sorted(float(g[-1]) if isinstance(g, tuple) else float(g) for g in grid
-                      if (g[:-1] if isinstance(g, tuple) else ()) == prefix)
-        last = float(th[-1]) if isinstance(th, tuple) else float(th)
-        i = line.index(last)
-        lo, hi = line[max(i - 1, 0)], line[min(i + 1, len(line) - 1)]
+        # Refine the last component of theta between its grid neighbours (others fixed), from
+        # the best point of each of the ``refine_starts`` best prefixes (the other components).
+        def prefix_of(g: Any) -> tuple[Any, ...]:
+            return tuple(g[:-1]) if isinstance(g, tuple) else ()
 
-        def make(x: float) -> Any:
-            return (*prefix, float(x)) if isinstance(th, tuple) else float(x)
+        starts: list[int] = []
+        for i in np.argsort(sses, kind="stable"):
+            if all(prefix_of(grid[int(i)]) != prefix_of(grid[j]) for j in starts):
+                starts.append(int(i))
+            if len(starts) == effect.refine_starts:
+                break
+        best_sse = sses[best]
+        for i in starts:
+            th = grid[i]
+            prefix = prefix_of(th)
+            line = sorted(float(g[-1]) if isinstance(g, tuple) else float(g) for g in grid
+                          if prefix_of(g) == prefix)
+            last = float(th[-1]) if isinstance(th, tuple) else float(th)
+            k = line.index(last)
+            lo, hi = line[max(k - 1, 0)], line[min(k + 1, len(line) - 1)]
+            if hi <= lo:
+                continue
 
-        if hi > lo:
-            res = minimize_scalar(lambda x: _sse(build(make(x)), ident), bounds=(lo, hi),
-                                  method="bounded",
+            def make(x: float, th: Any = th, prefix: tuple[Any, ...] = prefix) -> Any:
+                return (*prefix, float(x)) if isinstance(th, tuple) else float(x)
+
+            res = minimize_scalar(lambda x, make=make: _sse(build(make(x)), ident),
+                                  bounds=(lo, hi), method="bounded",
                                   options={"maxiter": 8, "xatol": 1e-3 * (hi - lo)})
-            if float(res.fun) < sses[best]:
-                model = build(make(float(res.x)))
+            if float(res.fun) < best_sse:
+                model, best_sse = build(make(float(res.x))), float(res.fun)
     return model
 
 

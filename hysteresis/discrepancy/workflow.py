@@ -56,8 +56,8 @@ class WorkflowSettings:
     #: Stop when the held-out RMSE is within this factor of the measurement-noise floor.
     noise_factor: float = 2.0
     #: Physical evidence beyond the output fit: a friction candidate must show in the load
-    #: cells' friction reading and go first when it does; a term's coefficients must carry
-    #: the sign its physics allows (False: judge on the output alone, for comparison).
+    #: cells' friction reading and go first when it does (False: judge on the output alone,
+    #: for comparison).
     physical_evidence: bool = True
     #: When no single candidate clears the bar, try every pair: two effects that interact
     #: (the base bends to one and hides the other) are added together when the pair removes
@@ -202,22 +202,9 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
         # no friction claim, or the runs carry no tension at both ends).
         "friction_evidence": friction if friction is not None else corroboration(
             effect.name, [g.ident for g in groups]),
-        # The term's coefficients carry the sign its physics allows in every configuration
-        # (None: either sign is physical).
-        "physical_sign": _sign_ok(effect, groups, models),
         "heldout_per_run": {rid: {"before": r0[rid], "after": r1[rid]} for rid in r0},
         "parameters": params,
     }
-
-
-def _sign_ok(effect: Effect, groups: Sequence[Group],
-             models: dict[str, ComposedModel]) -> bool | None:
-    if effect.n_linear == 0:
-        return None
-    verdicts = [effect.sign_ok(g.ident, models[g.key].coef_[-effect.n_linear:]) for g in groups]
-    if all(v is None for v in verdicts):
-        return None
-    return all(v is not False for v in verdicts)
 
 
 def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: Sequence[Group],
@@ -236,8 +223,7 @@ def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: 
     from itertools import combinations
 
     pool = [s for s in scores
-            if not st.physical_evidence or (s["friction_evidence"]["corroborated"] is not False
-                                            and s["physical_sign"] is not False)]
+            if not st.physical_evidence or s["friction_evidence"]["corroborated"] is not False]
     h0 = _rmse(current.errors(groups)[1])
     r0 = current.per_run_rmse(groups)
     best: list[dict[str, Any]] = []
@@ -261,7 +247,6 @@ def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: 
         if (gain >= st.min_relative_gain and d_bic <= st.max_delta_bic
                 and joint["gain_over_better_member"] >= st.min_relative_gain
                 and joint["runs_improved"] >= st.min_runs_improved
-                and (not st.physical_evidence or s2["physical_sign"] is not False)
                 and d_bic < best_bic):
             best_bic = d_bic
             s2["pair"] = joint
@@ -274,8 +259,7 @@ def _accept(s: dict[str, Any], st: WorkflowSettings) -> bool:
               and s["runs_improved"] >= st.min_runs_improved)
     if not st.physical_evidence:
         return bool(fit_ok)
-    return bool(fit_ok and s["friction_evidence"]["corroborated"] is not False
-                and s["physical_sign"] is not False)
+    return bool(fit_ok and s["friction_evidence"]["corroborated"] is not False)
 
 
 def _compact_locate(loc: dict[str, Any]) -> dict[str, Any]:
@@ -406,7 +390,6 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                 "runs_improved": chosen["runs_improved"],
                 "residual_explained": chosen["residual_explained"],
                 "friction_evidence": chosen["friction_evidence"],
-                "physical_sign": chosen["physical_sign"],
                 "heldout_per_run": chosen["heldout_per_run"],
                 "parameters": chosen["parameters"],
                 "runner_up": next((
@@ -476,7 +459,7 @@ def _reach_note(within: list[str], base_name: str) -> str:
 def _public(s: dict[str, Any]) -> dict[str, Any]:
     keys = ("name", "relative_gain", "delta_bic", "rmse_before", "rmse_after",
             "heldout_rmse_before", "heldout_rmse_after", "runs_improved", "residual_explained",
-            "friction_evidence", "physical_sign")
+            "friction_evidence")
     return {k: s[k] for k in keys}
 
 

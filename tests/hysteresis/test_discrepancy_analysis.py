@@ -20,6 +20,7 @@ from hysteresis.discrepancy.effects import (
     CANDIDATES,
     EFFECT_NAMES,
     ComposedModel,
+    Effect,
     Term,
     candidate,
     fit_joint,
@@ -193,28 +194,66 @@ def test_saturation_term_clips_the_loop_tips():
     assert m.coef_[0] == pytest.approx(-1.0, abs=0.15)  # coefficient -c, c = 1: a hard stop
 
 
-def test_asymmetry_and_elongation_terms_are_jointly_fitted_linear_features():
+def test_asymmetry_term_is_a_jointly_fitted_linear_feature():
     t, u = sine_decay()
     # the rig rests for a while before the first motion
     t = np.r_[np.arange(0, 2.0, DT), t + 2.0]
     u = np.r_[np.zeros(t.size - u.size), u]
     gamma = make_family("gamma", thresholds=[0.0, 0.3, 1.0], constraint="free")
     base = gamma.design_matrix(u) @ np.array([0.3, 0.4, 0.25])  # inside the Gamma family
-    tension = 4 + np.abs(u)
-    probe = RunData(run_id="p", t=t, u=u, y=base, tension=tension)
-    feats = {
-        "asymmetry": np.abs(probe.s),  # loop-centre shift from the first motion on
-        "tendon_elongation": (tension**2 - 16) / np.max(tension**2),
-    }
-    for name, f in feats.items():
-        r = RunData(run_id=name, t=t, u=u, y=base - 0.2 * f, tension=tension)
-        # A base without an offset (with one, the loop-centre shift is within its reach).
-        m = fit_with_effect(
-            lambda: make_family("gamma", thresholds=[0.0, 0.3, 1.0], constraint="free"), [],
-            candidate(name), r)
-        assert isinstance(m.base_, type(gamma))
-        assert m.coef_[0] == pytest.approx(-0.2, rel=0.1), name
-        assert np.sqrt(np.mean((r.y - m.predict(r)) ** 2)) < 0.01, name
+    probe = RunData(run_id="p", t=t, u=u, y=base)
+    # loop-centre shift from the first motion on
+    r = RunData(run_id="asym", t=t, u=u, y=base - 0.2 * np.abs(probe.s))
+    # A base without an offset (with one, the loop-centre shift is within its reach).
+    m = fit_with_effect(
+        lambda: make_family("gamma", thresholds=[0.0, 0.3, 1.0], constraint="free"), [],
+        candidate("asymmetry"), r)
+    assert isinstance(m.base_, type(gamma))
+    assert m.coef_[0] == pytest.approx(-0.2, rel=0.1)
+    assert np.sqrt(np.mean((r.y - m.predict(r)) ** 2)) < 0.01
+
+
+class _StretchOnTheOutput(Effect):
+    """The elongation's earlier form, for contrast: the stretch subtracted from the output."""
+
+    name = "stretch_on_the_output"
+    n_linear = 1
+    has_theta = True
+    n_theta = 2
+
+    def grid(self, ident):
+        return [(r, w) for r in (0.1, 0.35, 1.0) for w in (0.0, 0.5, 1.0)]
+
+    def context(self, ident):
+        return candidate("tendon_elongation").context(ident)
+
+    def features(self, run, theta, y_base, ctx):
+        return candidate("tendon_elongation").profile(run, *theta, ctx)[:, None]
+
+
+def test_elongation_term_recovers_a_stretch_that_eats_input_travel():
+    # The tendon stretches before the sheath's friction passes the motion on: the follower
+    # sees u - c T^2, so while the plays hold the output the stretch only delays it. The term
+    # recovers c; the same profile subtracted from the output moves a held output and fits
+    # far worse.
+    probe = _tension_probe()
+    eff = candidate("tendon_elongation")
+    ctx = eff.context(probe)
+    assert ctx["pull_sign"] == 1.0
+    c = 0.22 * float(np.ptp(probe.u))  # between grid points: found by the refinement
+    y = plant(probe.u - c * eff.profile(probe, 0.1, 1.0, ctx))
+    r = replace(probe, run_id="stretch", y=y)
+    f = lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))  # noqa: E731
+    m = fit_with_effect(f, [], eff, r)
+    assert m.terms[0].theta[1] == 1.0 and m.terms[0].theta[2] == pytest.approx(c, rel=0.02)
+    sse = lambda m: float(np.sum((r.y - m.predict(r)) ** 2))  # noqa: E731
+    assert sse(m) < 1e-4 * float(np.sum((r.y - r.y.mean()) ** 2))
+    assert sse(m) < 0.01 * sse(fit_with_effect(f, [], _StretchOnTheOutput(), r))
+    # pulling is whichever direction raises the tension: a mirrored rig gives the same fit
+    mirror = replace(r, u=-r.u, y=-r.y)
+    assert eff.context(mirror)["pull_sign"] == -1.0
+    mm = fit_with_effect(f, [], eff, mirror)
+    assert mm.terms[0].theta[2] == pytest.approx(c, rel=0.02)
 
 
 def test_rate_dependence_term_recovers_a_speed_dependent_lag():
@@ -328,40 +367,51 @@ def test_elongation_profile_follows_the_friction_of_the_speed_law():
     probe = _tension_probe()
     eff = candidate("tendon_elongation")
     ctx = eff.context(probe)
-    f0 = eff.features(probe, (0.35, 0.5), probe.y, ctx)
-    assert np.allclose(eff.features(probe, (0.35, 0.5), probe.y, ctx,
-                                    friction=np.ones(probe.n)), f0)
-    assert np.allclose(eff.features(probe, (0.35, 0.5), probe.y, ctx,
-                                    friction=np.full(probe.n, 2.0)),
-                       eff.features(probe, (0.7, 0.5), probe.y, ctx))
-    assert not np.allclose(f0, eff.features(probe, (0.7, 0.5), probe.y, ctx))
-    # the composed model hands the operator terms' friction factor to the profile
+    f0 = eff.profile(probe, 0.35, 0.5, ctx)
+    assert np.allclose(eff.profile(probe, 0.35, 0.5, ctx, friction=np.ones(probe.n)), f0)
+    assert np.allclose(eff.profile(probe, 0.35, 0.5, ctx, friction=np.full(probe.n, 2.0)),
+                       eff.profile(probe, 0.7, 0.5, ctx))
+    assert not np.allclose(f0, eff.profile(probe, 0.7, 0.5, ctx))
+    # the composed model hands the operator terms' friction factor to the stretch
     rate = candidate("rate_dependence")
     gamma = lambda: make_family("gamma", thresholds=[0.0, 0.6, 2.0])  # noqa: E731
     theta = rate.operator_grid(probe)[5]
-    m = ComposedModel(gamma, [Term(rate, theta), Term(eff, (0.35, 0.5), tuple(ctx.items()))])
-    expect = eff.features(probe, (0.35, 0.5), probe.y, ctx, friction=rate.scale(probe, theta))
-    assert np.allclose(m._features(probe, probe.y), expect)
+    m = ComposedModel(gamma, [Term(rate, theta), Term(eff, (0.35, 0.5, 1.5), tuple(ctx.items()))])
+    expect = probe.u - 1.5 * eff.profile(probe, 0.35, 0.5, ctx, friction=rate.scale(probe, theta))
+    assert np.allclose(m._input(probe), expect)
+
+
+def test_input_side_terms_apply_in_the_order_of_the_drive():
+    # The carriage's backlash comes before the tendon's stretch: play(u) - stretch, whatever
+    # order the terms joined the model in.
+    probe = _tension_probe()
+    el, dz = candidate("tendon_elongation"), candidate("dead_zone")
+    ctx = tuple(el.context(probe).items())
+    f = lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))  # noqa: E731
+    expect = play(probe.u, 0.2, z0=float(probe.u[0])) - 1.5 * el.profile(probe, 0.35, 0.5,
+                                                                          dict(ctx))
+    for terms in ([Term(dz, 0.4), Term(el, (0.35, 0.5, 1.5), ctx)],
+                  [Term(el, (0.35, 0.5, 1.5), ctx), Term(dz, 0.4)]):
+        assert np.allclose(ComposedModel(f, terms)._input(probe), expect)
 
 
 def test_a_stop_clips_the_motion_the_mechanism_terms_shape():
-    # The follower's stop limits its motion, and a tendon's stretch is part of that motion:
-    # y = min(base - stretch, cap), not min(base, cap) - stretch. The saturation term reads
-    # the base plus the terms that act inside the mechanism (``before_stop``).
+    # The follower's stop limits its motion, and the direction-dependent shift is part of that
+    # motion: y = min(base + shift, cap), not min(base, cap) + shift. The saturation term reads
+    # the base plus the output terms that act inside the mechanism (``before_stop``); the
+    # stretch acts on the input side, so the base already carries it.
     probe = _tension_probe()
-    eff = candidate("tendon_elongation")
-    ctx = eff.context(probe)
-    stretch = eff.features(probe, (0.35, 1.0), probe.y, ctx)[:, 0]
-    free = plant(probe.u) - 2.0 * stretch
+    eff = candidate("asymmetry")
+    free = plant(probe.u) + 0.3 * np.abs(probe.s)
     cap = float(np.percentile(free, 90))
     r = RunData(run_id="stop", t=probe.t, u=probe.u, y=np.minimum(free, cap),
                 tension=probe.tension)
     f = lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))  # noqa: E731
     sse = lambda m: float(np.sum((r.y - m.predict(r)) ** 2))  # noqa: E731
     inside = fit_with_effect(f, fit_with_effect(f, [], eff, r).terms, candidate("saturation"), r)
-    assert [t.effect.name for t in inside.terms] == ["tendon_elongation", "saturation"]
+    assert [t.effect.name for t in inside.terms] == ["asymmetry", "saturation"]
     assert sse(inside) < 1e-3 * float(np.sum((r.y - r.y.mean()) ** 2))
-    eff.before_stop = False  # the old composition: the stretch added after the stop
+    eff.before_stop = False  # the shift added after the stop
     try:
         outside = fit_with_effect(f, fit_with_effect(f, [], eff, r).terms,
                                   candidate("saturation"), r)
@@ -372,13 +422,13 @@ def test_a_stop_clips_the_motion_the_mechanism_terms_shape():
 
 def test_a_latency_delays_every_channel_the_model_reads(monkeypatch):
     # The output is read late, so the stretch (driven by the measured tension) is late too:
-    # y(t) = [base(u) - c T^2](t - tau). The delay term shifts the tension with the input.
+    # y(t) = base(u - c T^2)(t - tau). The delay term shifts the tension with the input.
     probe = _tension_probe()
     eff = candidate("tendon_elongation")
     ctx = eff.context(probe)
     tau = 0.12
-    stretch = eff.features(probe, (0.35, 1.0), probe.y, ctx)[:, 0]
-    y = shift(probe.t, plant(probe.u) - 0.5 * stretch, tau)
+    c = 0.22 * float(np.ptp(probe.u))
+    y = shift(probe.t, plant(probe.u - c * eff.profile(probe, 0.1, 1.0, ctx)), tau)
     r = RunData(run_id="late", t=probe.t, u=probe.u, y=y, tension=probe.tension)
     f = lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))  # noqa: E731
     delay = candidate("time_delay")
@@ -388,7 +438,7 @@ def test_a_latency_delays_every_channel_the_model_reads(monkeypatch):
     assert np.allclose(seen.tension, shift(r.t, r.tension, tau))
     sse = lambda m: float(np.sum((r.y - m.predict(r)) ** 2))  # noqa: E731
     both = fit_with_effect(f, [Term(delay, tau)], eff, r)
-    assert both.coef_[0] == pytest.approx(-0.5, rel=0.02)
+    assert both.terms[1].theta[2] == pytest.approx(c, rel=0.02)
     assert sse(both) < 1e-4 * float(np.sum((r.y - r.y.mean()) ** 2))
     sse_both = sse(both)
     # the old form: only the base's input is late
