@@ -397,13 +397,14 @@ class ComposedModel:
         self.tol = tol
         self._gamma: bool | None = None
 
-    def _input(self, run: RunData) -> FloatArray:
+    def _input(self, run: RunData, friction: FloatArray | None = None) -> FloatArray:
         """The input the base sees: the input-side terms in the order the mechanism applies
         them (the carriage's backlash before the tendon's stretch), whatever order they joined
-        in."""
+        in. ``friction``: the operator terms' factor when the caller has it already."""
         u = run.u
         inputs = [t for t in self.terms if t.effect.side == "input" and not self._on_operators(t)]
-        friction = self._friction(run) if inputs else None
+        if inputs and friction is None:
+            friction = self._friction(run)
         for term in sorted(inputs, key=lambda t: t.effect.input_stage):
             u = term.effect.transform_input(run, u, term.theta, term.context, friction=friction)
         return u
@@ -423,8 +424,8 @@ class ComposedModel:
         operator ``min(u, max(u - p_i, w))`` from the zero state; ``f`` is the product of the
         operator terms' friction factors.
         """
-        u = self._input(run)
         f = self._friction(run)
+        u = self._input(run, f)
         if f is None:
             f = np.ones(run.n)
         p = _gamma_thresholds(base)
