@@ -301,17 +301,21 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def headline(report: Mapping[str, Any]) -> str:
-    """One sentence: which effect was added and by how much it cut the held-out error."""
+    """One sentence: which effect was added and by how much it cut the held-out error (and
+    which effects the load cells show that the model already reproduces)."""
+    measured = [m["name"] for m in report.get("measured_within_reach", [])]
+    also = (f"; the load cells also show {', '.join(measured)}, already reproduced by the "
+            "model (named, not added)") if measured else ""
     if not report["effects"]:
         return (f"no missing effect: no candidate term beats the noise on the held-out runs "
                 f"(base {report['base_family']}, held-out RMSE "
-                f"{report['summary']['heldout_rmse_before']:.4g})")
+                f"{report['summary']['heldout_rmse_before']:.4g}){also}")
     parts = []
     for e in report["effects"]:
         cut = 1.0 - e["heldout_rmse_after"] / e["heldout_rmse_before"]
         parts.append(f"{e['name']} (held-out RMSE {e['heldout_rmse_before']:.4g} -> "
                      f"{e['heldout_rmse_after']:.4g}, -{100 * cut:.1f} %)")
-    return f"base {report['base_family']} is missing: " + "; then ".join(parts)
+    return f"base {report['base_family']} is missing: " + "; then ".join(parts) + also
 
 
 def _json_default(obj: Any) -> Any:
@@ -346,6 +350,8 @@ def _track(cfg: Mapping[str, Any], report: Mapping[str, Any], report_path: Path,
             params = {"source": report["source"], "base_family": report["base_family"],
                       "base_params": json.dumps(report["base_params"]),
                       "effects": ",".join(e["name"] for e in report["effects"]) or "none",
+                      "measured_within_reach": ",".join(
+                          m["name"] for m in report.get("measured_within_reach", [])) or "none",
                       **{f"workflow.{k}": v for k, v in (cfg.get("workflow") or {}).items()}}
             tracker.log(run_id, params=params,
                         metrics={k: float(v) for k, v in metrics.items() if math.isfinite(v)})

@@ -10,9 +10,11 @@ not go through the output position at all. Two candidates claim that friction it
 * ``asymmetry``: friction differs between pulling and releasing (``direction_ratio`` != 1).
 
 Every other candidate (a latency of the output measurement, a drift, extra stretch, a stop, an
-actuator-side dead zone) leaves the friction reading alone. The workflow uses these ratios to
-keep a friction hypothesis from standing in for a latency or a stretch that shapes the loop the
-same way: a friction candidate is only accepted when the load cells show the change it claims.
+actuator-side dead zone) leaves the friction reading alone (the dead zone has a reading of its
+own, :mod:`.backlash`; :mod:`.evidence` says which candidate claims what). The workflow uses
+these ratios to keep a friction hypothesis from standing in for a latency or a stretch that
+shapes the loop the same way: a friction candidate is only accepted when the load cells show
+the change it claims.
 
 Only samples of *full* sliding count: after a reversal the slip front needs some travel to run
 through the sheath (the ratio swings from one sign to the other meanwhile), so samples within
@@ -21,7 +23,6 @@ through the sheath (the ratio swings from one sign to the other meanwhile), so s
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -35,9 +36,6 @@ from hysteresis.discrepancy.runs import RunData
 #: the weakest effects tried (rate_dependence 0.5, asymmetry 0.5) give 1.18 and 1.30.
 MIN_SPEED_RATIO = 1.08
 MIN_DIRECTION_RATIO = 1.12
-
-#: Which candidate claims which friction change.
-CLAIMS = {"rate_dependence": "speed_ratio", "asymmetry": "direction_ratio"}
 
 
 def travel_since_reversal(u: FloatArray, v: FloatArray) -> FloatArray:
@@ -112,29 +110,3 @@ def _geomean(x: list[float]) -> float:
 
 def _ratio(a: float, b: float) -> float:
     return a / b if b > 0 and a > 0 else float("nan")
-
-
-def corroboration(name: str, idents: Sequence[RunData]) -> dict[str, Any]:
-    """Does the load-cell friction reading show what candidate ``name`` claims?
-
-    Returns ``{"claim": ..., "per_configuration": {...}, "corroborated": True/False/None}``;
-    ``None`` when the candidate makes no friction claim or no run carries both tensions (the
-    check cannot be made, and the candidate is judged on the output alone).
-    """
-    claim = CLAIMS.get(name)
-    if claim is None:
-        return {"claim": None, "per_configuration": {}, "corroborated": None}
-    per: dict[str, float] = {}
-    for r in idents:
-        ratios = friction_ratios(r)
-        if ratios is not None and np.isfinite(ratios[claim]):
-            per[r.config_key] = ratios[claim]
-    if not per:
-        return {"claim": claim, "per_configuration": {}, "corroborated": None}
-    if claim == "speed_ratio":
-        ok = all(x >= MIN_SPEED_RATIO for x in per.values())
-    else:
-        logs = [float(np.log(x)) for x in per.values()]
-        ok = (all(abs(x) >= np.log(MIN_DIRECTION_RATIO) for x in logs)
-              and len({np.sign(x) for x in logs}) == 1)  # one sheath: the same side everywhere
-    return {"claim": claim, "per_configuration": per, "corroborated": bool(ok)}

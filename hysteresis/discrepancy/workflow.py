@@ -13,6 +13,9 @@ configuration's held-out runs. Each round:
    after a joint refit, in which the earlier terms' nonlinear parameters are searched again
    with the candidate in place, from two starting points (:func:`.effects.fit_joint`);
 4. **show**: RMSE before/after on identification and held-out runs, recorded per effect.
+
+When the search ends, effects the load cells show (:mod:`.evidence`) that the final model did not
+take are scored once more and reported as ``measured_within_reach``: named, not added.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from hysteresis.discrepancy.effects import (
     fit_joint,
     fit_with_effect,
 )
-from hysteresis.discrepancy.friction import corroboration
+from hysteresis.discrepancy.evidence import corroboration
 from hysteresis.discrepancy.locate import autocorrelation, locate
 from hysteresis.discrepancy.runs import RunData, concat_runs
 
@@ -55,9 +58,9 @@ class WorkflowSettings:
     min_runs_improved: float = 0.5
     #: Stop when the held-out RMSE is within this factor of the measurement-noise floor.
     noise_factor: float = 2.0
-    #: Physical evidence beyond the output fit: a friction candidate must show in the load
-    #: cells' friction reading and go first when it does (False: judge on the output alone,
-    #: for comparison).
+    #: Physical evidence beyond the output fit: a candidate that claims something the load
+    #: cells can read (a friction change, a dead travel) must show in that reading and goes
+    #: first when it does (False: judge on the output alone, for comparison).
     physical_evidence: bool = True
     #: When no single candidate clears the bar, try every pair: two effects that interact
     #: (the base bends to one and hides the other) are added together when the pair removes
@@ -153,11 +156,11 @@ def fit_models(base_factory: BaseFactory, groups: Sequence[Group],
 
 def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[Group],
                     terms: dict[str, list[Term]], before: Evaluation,
-                    n_eff: float, friction: dict[str, Any] | None = None, *,
+                    n_eff: float, load_cells: dict[str, Any] | None = None, *,
                     joint_retune: bool = True) -> dict[str, Any]:
     """Add ``effect`` to every configuration's model, refit, and measure what it removes;
-    for a friction hypothesis, also read the load cells for the change it claims
-    (``friction``: that reading when already made, it does not depend on the model).
+    for a candidate with a load-cell claim, also read the load cells for it (``load_cells``:
+    that reading when already made, it does not depend on the model).
     ``joint_retune``: search the earlier terms' nonlinear parameters again (:func:`fit_joint`)."""
     models = {}
     for g in groups:
@@ -198,9 +201,9 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
         "n_params": k,
         "runs_improved": improved,
         "residual_explained": explained,
-        # A friction hypothesis must show in the friction the load cells read (None: it makes
-        # no friction claim, or the runs carry no tension at both ends).
-        "friction_evidence": friction if friction is not None else corroboration(
+        # A load-cell claim must show in the load cells (None: the candidate makes no such
+        # claim, or the runs lack the channels the reading needs).
+        "load_cell_evidence": load_cells if load_cells is not None else corroboration(
             effect.name, [g.ident for g in groups]),
         "heldout_per_run": {rid: {"before": r0[rid], "after": r1[rid]} for rid in r0},
         "parameters": params,
@@ -208,7 +211,7 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
 
 
 def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: Sequence[Group],
-               current: Evaluation, n_eff: float, friction: dict[str, Any],
+               current: Evaluation, n_eff: float, load_cells: dict[str, Any],
                st: WorkflowSettings) -> list[dict[str, Any]]:
     """Two candidates that clear the bar only together (greedy search cannot see them).
 
@@ -223,7 +226,7 @@ def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: 
     from itertools import combinations
 
     pool = [s for s in scores
-            if not st.physical_evidence or s["friction_evidence"]["corroborated"] is not False]
+            if not st.physical_evidence or s["load_cell_evidence"]["corroborated"] is not False]
     h0 = _rmse(current.errors(groups)[1])
     r0 = current.per_run_rmse(groups)
     best: list[dict[str, Any]] = []
@@ -232,7 +235,7 @@ def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: 
         on_a = {g.key: list(a["models"][g.key].terms) for g in groups}
         try:
             s2 = score_candidate(CANDIDATES[b["name"]], base_factory, groups, on_a, a["after"],
-                                 n_eff, friction[b["name"]], joint_retune=st.joint_retune)
+                                 n_eff, load_cells[b["name"]], joint_retune=st.joint_retune)
         except HysteresisError:
             continue
         h1 = s2["heldout_rmse_after"]
@@ -259,7 +262,7 @@ def _accept(s: dict[str, Any], st: WorkflowSettings) -> bool:
               and s["runs_improved"] >= st.min_runs_improved)
     if not st.physical_evidence:
         return bool(fit_ok)
-    return bool(fit_ok and s["friction_evidence"]["corroborated"] is not False)
+    return bool(fit_ok and s["load_cell_evidence"]["corroborated"] is not False)
 
 
 def _compact_locate(loc: dict[str, Any]) -> dict[str, Any]:
@@ -341,7 +344,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     skipped = [n for n in st.candidates if n not in remaining]
     failed: dict[str, str] = {}
     # The load cells' reading depends on the data only: made once, reused every round.
-    friction = {n: corroboration(n, [g.ident for g in groups]) for n in remaining}
+    load_cells = {n: corroboration(n, [g.ident for g in groups]) for n in remaining}
     for round_ in range(st.max_effects + 1):
         preds = [current.ident_pred.get(r.run_id, current.held_pred.get(r.run_id))
                  for r in all_runs]
@@ -360,7 +363,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         for name in it:
             try:
                 scores.append(score_candidate(CANDIDATES[name], base_factory, groups, terms,
-                                              current, n_eff, friction[name],
+                                              current, n_eff, load_cells[name],
                                               joint_retune=st.joint_retune))
             except HysteresisError as err:
                 # The base cannot be refitted with this term (e.g. a density that no longer
@@ -368,14 +371,14 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                 failed[name] = str(err)
         scores.sort(key=lambda s: s["delta_bic"])
         rankings.append([_public(s) for s in scores])
-        # A friction change the load cells show is measured, not inferred from the output:
+        # A change the load cells show is measured, not inferred from the output:
         # an acceptable candidate with that corroboration goes ahead of the others.
         winner = next((s for s in scores if st.physical_evidence and _accept(s, st)
-                       and s["friction_evidence"]["corroborated"]), None)
+                       and s["load_cell_evidence"]["corroborated"]), None)
         winner = winner or next((s for s in scores if _accept(s, st)), None)
         added = [winner] if winner is not None else []
         if not added and st.pair_search and st.max_effects - len(effects) >= 2:
-            added = _best_pair(scores, base_factory, groups, current, n_eff, friction, st)
+            added = _best_pair(scores, base_factory, groups, current, n_eff, load_cells, st)
         if not added:
             break
         for k, chosen in enumerate(added):
@@ -389,7 +392,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                 "n_params": chosen["n_params"],
                 "runs_improved": chosen["runs_improved"],
                 "residual_explained": chosen["residual_explained"],
-                "friction_evidence": chosen["friction_evidence"],
+                "load_cell_evidence": chosen["load_cell_evidence"],
                 "heldout_per_run": chosen["heldout_per_run"],
                 "parameters": chosen["parameters"],
                 "runner_up": next((
@@ -418,6 +421,9 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
             current = chosen["after"]
             evaluations.append(current)
             remaining.remove(chosen["name"])
+    measured = (_measured_within_reach(remaining, load_cells, base_factory, groups, terms,
+                                       current, base_name, [e["name"] for e in effects], st)
+                if st.physical_evidence else [])
     e_id0, e_h0 = evaluations[0].errors(groups)
     e_id1, e_h1 = current.errors(groups)
     report: dict[str, Any] = {
@@ -426,6 +432,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         "effects": effects,
         "located": located,
         "within_base_reach": within,
+        "measured_within_reach": measured,
         "within_base_reach_note": _reach_note(within, base_name),
         "reach_remaining_fraction": reach,
         "candidates_skipped": {n: "needs a channel the runs do not carry (tension)"
@@ -447,6 +454,64 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     return report
 
 
+#: What each load-cell claim means, for the report's notes.
+_CLAIM_TEXT = {
+    "dead_travel": "the carriage travels {x} of the input span after every reversal before "
+                   "the tendon's tension moves (a dead zone)",
+    "direction_ratio": "the friction pulling is {x} times the friction releasing",
+    "speed_ratio": "the friction at speed is {x} times the friction at low speed",
+}
+
+
+def _measured_within_reach(remaining: Sequence[str], load_cells: dict[str, dict[str, Any]],
+                           base_factory: BaseFactory, groups: Sequence[Group],
+                           terms: dict[str, list[Term]], current: Evaluation, base_name: str,
+                           added: Sequence[str], st: WorkflowSettings) -> list[dict[str, Any]]:
+    """Effects the load cells show but the final model did not take: named, not added.
+
+    Two effects can leave the same mark on the output (an actuator dead zone and a
+    direction-dependent friction both shift the loop from the first motion on), and then the
+    term added first reproduces both: the second one's term removes nothing more, so the output
+    cannot name it. The load cells can (a dead travel at the reversals, a pull/release friction
+    ratio). Each such effect is scored once more against the final model and reported with what
+    its term would do; it is not added, because it does not shrink the gap.
+    """
+    out: list[dict[str, Any]] = []
+    h = [r for g in groups for r in g.heldout]
+    n_eff = float(sum(effective_n(r.y - current.held_pred[r.run_id]) for r in h))
+    model = "+".join([base_name, *added])
+    for name in remaining:
+        ev = load_cells.get(name, {})
+        if not ev.get("corroborated"):
+            continue
+        try:
+            s = score_candidate(CANDIDATES[name], base_factory, groups, terms, current, n_eff,
+                                ev, joint_retune=st.joint_retune)
+        except HysteresisError:
+            continue
+        per = ev["per_configuration"]
+        shown = ", ".join(f"{x:.3g}" if ev["claim"] != "dead_travel" else f"{100 * x:.1f} %"
+                          for x in per.values())
+        change = (f"its term would change the held-out RMSE by "
+                  f"{-100 * s['relative_gain']:+.1f} %")
+        why = (f"the model so far ({model}) already reproduces its mark on the output: {change}, "
+               "under the bar, so it is named but not added" if not _accept(s, st) else
+               f"{change}, but the search stopped first (max_effects or the noise floor)")
+        out.append({
+            "name": name,
+            "load_cell_evidence": ev,
+            "heldout_rmse_without": s["heldout_rmse_before"],
+            "heldout_rmse_with": s["heldout_rmse_after"],
+            "relative_gain": s["relative_gain"],
+            "delta_bic": s["delta_bic"],
+            "parameters": s["parameters"],
+            "note": (f"the load cells show {name}: "
+                     + _CLAIM_TEXT[ev["claim"]].format(x=shown)
+                     + f" in every configuration; {why}"),
+        })
+    return out
+
+
 def _reach_note(within: list[str], base_name: str) -> str:
     if not within:
         return f"no candidate is within the {base_name} family's reach"
@@ -459,7 +524,7 @@ def _reach_note(within: list[str], base_name: str) -> str:
 def _public(s: dict[str, Any]) -> dict[str, Any]:
     keys = ("name", "relative_gain", "delta_bic", "rmse_before", "rmse_after",
             "heldout_rmse_before", "heldout_rmse_after", "runs_improved", "residual_explained",
-            "friction_evidence")
+            "load_cell_evidence")
     return {k: s[k] for k in keys}
 
 

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from hysteresis.discrepancy.effects import candidate
+from hysteresis.discrepancy.evidence import corroboration
 from hysteresis.discrepancy.friction import (
     MIN_DIRECTION_RATIO,
     MIN_SPEED_RATIO,
-    corroboration,
     friction_ratios,
     friction_reading,
     travel_since_reversal,

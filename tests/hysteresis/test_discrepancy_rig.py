@@ -79,6 +79,8 @@ def test_clean_runs_have_no_missing_effect():
     assert rep["effects"] == []
     # every candidate was scored and none cleared the bar
     assert all(s["relative_gain"] < 0.2 for s in rep["rankings"][0])
+    # and the load cells show none of the effects they can read
+    assert rep["measured_within_reach"] == []
 
 
 @pytest.mark.parametrize(("effect", "strength", "pair"), [
@@ -101,19 +103,43 @@ def test_hidden_effect_is_named_first_and_halves_the_heldout_error(effect, stren
     assert e["evidence"]["runs_improved"] == 1.0
 
 
-def test_friction_effects_are_corroborated_by_the_load_cells():
+def test_load_cell_effects_are_corroborated_by_the_load_cells():
     rate = first(report({"rate_dependence": 1.0}, pair="e"))
-    ev = rate["evidence"]["friction_evidence"]
+    ev = rate["evidence"]["load_cell_evidence"]
     assert ev["claim"] == "speed_ratio" and ev["corroborated"] is True
     assert all(x > 1.2 for x in ev["per_configuration"].values())
     asym = first(report({"asymmetry": 2.0}))
-    assert asym["evidence"]["friction_evidence"]["corroborated"] is True
+    assert asym["evidence"]["load_cell_evidence"]["corroborated"] is True
     # a latency makes the plays look wider at speed too, but the friction did not change:
     # the speed-scaled plays are ranked and rejected by the load cells
     delay = report({"time_delay": 1.0})
     rate_on_delay = ranked(delay, "rate_dependence")
     assert rate_on_delay["relative_gain"] > 0.3  # 0.43
-    assert rate_on_delay["friction_evidence"]["corroborated"] is False
+    assert rate_on_delay["load_cell_evidence"]["corroborated"] is False
+    # the input load cell sees the carriage move 0.4 mm after each reversal before the
+    # tendon's tension does (3.3 % of the 12 mm span)
+    dz = first(report({"dead_zone": 1.0}, pair="e"))
+    ev = dz["evidence"]["load_cell_evidence"]
+    assert ev["claim"] == "dead_travel" and ev["corroborated"] is True
+    assert all(0.025 < x < 0.036 for x in ev["per_configuration"].values())
+
+
+def test_a_dead_zone_the_asymmetry_term_reproduces_is_named_from_the_load_cells():
+    # On a Gamma base, what a dead zone leaves beyond the plays' reach is a loop shift from
+    # the first motion: the asymmetry term's own shape. Added first (the load cells show the
+    # friction asymmetry and it clears the bar), the asymmetry term takes both shifts and
+    # the dead zone's term removes nothing more; the output cannot name it. The input load
+    # cell can: the report names it as measured and already reproduced, and does not add it.
+    rep = report({"asymmetry": 2.0, "dead_zone": 1.0})
+    names = [e["name"] for e in rep["effects"]]
+    assert names[0] == "asymmetry" and "dead_zone" not in names
+    (dz,) = [m for m in rep["measured_within_reach"] if m["name"] == "dead_zone"]
+    assert dz["load_cell_evidence"]["corroborated"] is True
+    assert abs(dz["relative_gain"]) < 0.05 and dz["delta_bic"] > 0
+    assert "named but not added" in dz["note"] and "asymmetry" in dz["note"]
+    # the clean level: what is left is what the Gamma base leaves on clean runs
+    clean = report({})
+    assert rep["summary"]["heldout_rmse_after"] < 1.1 * clean["summary"]["heldout_rmse_before"]
 
 
 def test_tendon_elongation_is_named_where_the_tension_is_high():
@@ -140,7 +166,7 @@ def test_without_physical_evidence_weak_friction_asymmetry_is_misnamed():
     assert first(fit_only)["name"] == "tendon_elongation"
     with_evidence = report({"asymmetry": 1.0})
     assert first(with_evidence)["name"] == "asymmetry"
-    assert first(with_evidence)["evidence"]["friction_evidence"]["corroborated"] is True
+    assert first(with_evidence)["evidence"]["load_cell_evidence"]["corroborated"] is True
     # ... although the stretch fits the output better: the measured friction goes first
     assert (ranked(with_evidence, "tendon_elongation")["delta_bic"]
             < ranked(with_evidence, "asymmetry")["delta_bic"])

@@ -112,3 +112,21 @@ def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: P
     # seed 000's UKF model error regressed on the added term (evidence, one record)
     (fit,) = e["evidence"]["model_error_regression"].values()
     assert set(fit) == {"coefficient", "r2"}
+
+
+def test_headline_names_what_the_load_cells_show_but_the_model_already_reproduces():
+    from pipelines.discrepancy import headline
+
+    rep: dict[str, Any] = {
+        "base_family": "gamma",
+        "effects": [{"name": "asymmetry", "heldout_rmse_before": 0.104,
+                     "heldout_rmse_after": 0.065}],
+        "measured_within_reach": [{"name": "dead_zone"}],
+        "summary": {"heldout_rmse_before": 0.104},
+    }
+    line = headline(rep)
+    assert line.startswith("base gamma is missing: asymmetry (held-out RMSE 0.104 -> 0.065")
+    assert line.endswith("the load cells also show dead_zone, already reproduced by the model "
+                         "(named, not added)")
+    rep["effects"], rep["measured_within_reach"] = [], []
+    assert headline(rep).startswith("no missing effect") and "load cells" not in headline(rep)

@@ -97,8 +97,9 @@ def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
     # the two-effect part: one combination, both named, in the JSON and the table
     (combo,) = doc["combinations"]
     assert combo["effects"] == {"drift": 2.0, "time_delay": 1.0}
-    assert combo["all_named"] and not combo["extra"] and combo["reduction"] > 0.5
-    assert "| a | drift 2 + time_delay 1 | time_delay, drift | yes |" in (
+    assert combo["all_named"] and combo["all_added"] and not combo["extra"]
+    assert combo["reduction"] > 0.5
+    assert "| a | drift 2 + time_delay 1 | time_delay, drift | - | yes |" in (
         out / "discrepancy_study.md").read_text()
 
 

@@ -1,0 +1,73 @@
+"""What the load cells say about a candidate, independently of the output fit.
+
+Three candidates claim something the load cells can read without going through the output
+position:
+
+* ``rate_dependence``: friction grows with sliding speed (``speed_ratio`` > 1, :mod:`.friction`);
+* ``asymmetry``: friction differs between pulling and releasing (``direction_ratio`` != 1,
+  :mod:`.friction`);
+* ``dead_zone``: after every reversal the carriage travels a while before the tendon's tension
+  moves (``dead_travel`` > 0, :mod:`.backlash`).
+
+The other candidates make no load-cell claim and are judged on the output fit alone.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from hysteresis.discrepancy.backlash import MIN_DEAD_TRAVEL_FRACTION, dead_travel
+from hysteresis.discrepancy.friction import (
+    MIN_DIRECTION_RATIO,
+    MIN_SPEED_RATIO,
+    friction_ratios,
+)
+from hysteresis.discrepancy.runs import RunData
+
+#: Which candidate claims which reading.
+CLAIMS = {"rate_dependence": "speed_ratio", "asymmetry": "direction_ratio",
+          "dead_zone": "dead_travel"}
+
+
+def reading(claim: str, run: RunData) -> float | None:
+    """The value of ``claim`` on one identification run (None: the run cannot show it).
+    ``dead_travel`` is given as a fraction of the run's input span (scale-free)."""
+    if claim == "dead_travel":
+        got = dead_travel(run)
+        return None if got is None else got["fraction_of_span"]
+    ratios = friction_ratios(run)
+    if ratios is None or not np.isfinite(ratios[claim]):
+        return None
+    return float(ratios[claim])
+
+
+def corroboration(name: str, idents: Sequence[RunData]) -> dict[str, Any]:
+    """Do the load cells show what candidate ``name`` claims?
+
+    Returns ``{"claim": ..., "per_configuration": {...}, "corroborated": True/False/None}``;
+    ``None`` when the candidate makes no load-cell claim or no run carries the channels the
+    reading needs (the check cannot be made, and the candidate is judged on the output alone).
+    A claim holds when every configuration shows it (one sheath, one mechanism).
+    """
+    claim = CLAIMS.get(name)
+    if claim is None:
+        return {"claim": None, "per_configuration": {}, "corroborated": None}
+    per: dict[str, float] = {}
+    for r in idents:
+        x = reading(claim, r)
+        if x is not None:
+            per[r.config_key] = x
+    if not per:
+        return {"claim": claim, "per_configuration": per, "corroborated": None}
+    if claim == "speed_ratio":
+        ok = all(x >= MIN_SPEED_RATIO for x in per.values())
+    elif claim == "dead_travel":
+        ok = all(x >= MIN_DEAD_TRAVEL_FRACTION for x in per.values())
+    else:
+        logs = [float(np.log(x)) for x in per.values()]
+        ok = (all(abs(x) >= np.log(MIN_DIRECTION_RATIO) for x in logs)
+              and len({np.sign(x) for x in logs}) == 1)  # one sheath: the same side everywhere
+    return {"claim": claim, "per_configuration": per, "corroborated": bool(ok)}
