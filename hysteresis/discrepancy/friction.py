@@ -26,6 +26,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from hysteresis.discrepancy._ops import FloatArray
 from hysteresis.discrepancy.effects import speed
@@ -52,6 +53,21 @@ def travel_since_reversal(u: FloatArray, v: FloatArray) -> FloatArray:
     return out
 
 
+def follower_slides(run: RunData, *, fraction: float = 0.5) -> npt.NDArray[np.bool_]:
+    """Samples where the output follows the input at no less than ``fraction`` of its usual
+    rate (same direction): the whole tendon slides. Against an end-of-stroke stop the input
+    keeps pulling while the follower stands, and the tension ratio then reads the stop's
+    reaction, not friction."""
+    du = np.diff(run.u, prepend=run.u[0])
+    dy = np.diff(run.y, prepend=run.y[0])
+    den = float(np.dot(du, du))
+    if den == 0.0:
+        return np.zeros(run.n, dtype=bool)
+    gain = float(np.dot(du, dy)) / den  # the output's usual rate per unit input
+    return np.asarray(dy * np.sign(gain) * np.sign(du) >= fraction * abs(gain) * np.abs(du),
+                      dtype=np.bool_)
+
+
 def friction_reading(run: RunData, *, plateau_fraction: float = 0.3,
                      t_floor: float = 0.05) -> tuple[FloatArray, FloatArray, FloatArray] | None:
     """``(reading, speed, direction)`` on the fully sliding samples of ``run``, or ``None``
@@ -61,7 +77,7 @@ def friction_reading(run: RunData, *, plateau_fraction: float = 0.3,
     v = speed(run)  # the speed the rate term uses
     moving = np.abs(v) > 0.05 * float(np.percentile(np.abs(v), 99))
     travel = travel_since_reversal(run.u, np.where(moving, v, 0.0))
-    full = moving & (travel > plateau_fraction * float(np.ptp(run.u)))
+    full = moving & (travel > plateau_fraction * float(np.ptp(run.u))) & follower_slides(run)
     if int(full.sum()) < 30:
         return None
     ratio = np.log(np.maximum(run.tension, t_floor) / np.maximum(run.tension_out, t_floor))

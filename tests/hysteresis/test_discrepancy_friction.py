@@ -16,6 +16,7 @@ from hysteresis.discrepancy.evidence import corroboration
 from hysteresis.discrepancy.friction import (
     MIN_DIRECTION_RATIO,
     MIN_SPEED_RATIO,
+    follower_slides,
     friction_ratios,
     friction_reading,
     travel_since_reversal,
@@ -41,6 +42,33 @@ def capstan_run(*, gain: float = 0.0, asym: float = 0.0, noise: float = 0.0, see
     return RunData(run_id=f"g{gain}a{asym}", t=t, u=u, y=u,
                    tension=t_in if tensions else None, tension_out=t_out if tensions else None,
                    config={"curve_angle_deg": 90.0})
+
+
+def test_follower_slides_is_false_where_a_stop_holds_the_output():
+    t = np.arange(0.0, 8.0, DT)
+    u = 6.0 * np.sin(2 * np.pi * 0.25 * t)
+    y = np.minimum(0.8 * u, 3.0)  # a stop at 3 mm on the pull side
+    slides = follower_slides(RunData(run_id="s", t=t, u=u, y=y))
+    at_stop = y >= 3.0
+    held = at_stop & np.roll(at_stop, 1)  # at the stop since the sample before
+    assert held.sum() > 20 and not slides[held].any()
+    # elsewhere the output follows
+    assert slides[~at_stop].all()
+
+
+def test_a_follower_stop_does_not_read_as_friction_asymmetry():
+    # Against the stop the input keeps pulling while the follower stands: the tension ratio
+    # then reads the stop's reaction. Without the follower check, saturation 2 on these two
+    # tight configurations read a pull/release ratio of 0.85 and corroborated an asymmetry.
+    from pipelines.discrepancy_study import STUDY_EXCITATIONS, hidden_effect_runs
+
+    ident = hidden_effect_runs({"saturation": 2.0}, [(90.0, 30.0), (75.0, 30.0)],
+                               excitations={"sine_decay": STUDY_EXCITATIONS["sine_decay"]})
+    for r in ident:
+        ratios = friction_ratios(r)
+        assert ratios is not None
+        assert abs(np.log(ratios["direction_ratio"])) < np.log(1.06), ratios
+    assert corroboration("asymmetry", ident)["corroborated"] is False
 
 
 def test_travel_since_reversal_restarts_at_every_reversal():
