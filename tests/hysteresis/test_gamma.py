@@ -3,6 +3,8 @@ recursive inverses, rate independence, state carrying, sine -> triangle generali
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -248,23 +250,17 @@ def test_registry_and_bad_input() -> None:
     np.testing.assert_allclose(model.weights_, [1, 0, 0, 0, 0], atol=1e-10)
 
 
-REAL = "/work/shared/real-data/tendon-catheter"
-
-
-def test_real_catheter_identify_on_one_excitation_validate_on_the_other() -> None:
+def test_real_catheter_identify_on_one_excitation_validate_on_the_other(
+        catheter_dir: Path) -> None:
     """Real tendon-driven catheter (bending angle in deg vs tendon mm, 500 Hz): Gamma fitted
     on the decay-to-mid-stroke run predicts the held-out decay-to-zero run far better than
     the linear baseline. Output is in degrees, so the free-sum variant with an offset."""
-    import os
-
     import pandas as pd
 
     from hysteresis.linear import LinearModel
 
-    if not os.path.isdir(REAL):  # the lab's data share; not part of the repository
-        pytest.skip(f"{REAL} not mounted")
-    a = pd.read_csv(f"{REAL}/data_1_1.txt")
-    b = pd.read_csv(f"{REAL}/data_2_1.txt")
+    a = pd.read_csv(catheter_dir / "data_1_1.txt")
+    b = pd.read_csv(catheter_dir / "data_2_1.txt")
     u, y = a["Tendon Disp."].to_numpy(), a["Angle x"].to_numpy()
     ut, yt = b["Tendon Disp."].to_numpy(), b["Angle x"].to_numpy()
     gamma = GammaModel(constraint="free", fit_offset=True, max_threshold=1.0).fit(u, y)

@@ -14,7 +14,6 @@ from omegaconf import OmegaConf
 from pipelines.discrepancy import DiscrepancyError, run
 
 REPO = Path(__file__).resolve().parents[2]
-CATHETER = Path("/work/shared/real-data/tendon-catheter")
 REPORT_KEYS = {"base_family", "verdict", "effects", "located"}
 EFFECT_KEYS = {"name", "evidence", "rmse_before", "rmse_after", "heldout_rmse_before",
                "heldout_rmse_after"}
@@ -93,13 +92,13 @@ def test_stage_rejects_a_missing_source(tmp_path: Path):
         run(cfg(tmp_path / "nope", tmp_path / "r.json"))
 
 
-@pytest.mark.skipif(not CATHETER.is_dir(), reason="real catheter data not on this machine")
-def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: Path):
+def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: Path,
+                                                                     catheter_dir: Path):
     mapping = OmegaConf.to_container(
         OmegaConf.load(REPO / "conf" / "importer" / "tendon_catheter.yaml"))
     out = tmp_path / "catheter.json"
     # Gamma with free weights and an offset: the catheter maps mm of tendon to degrees.
-    rep = run(cfg(CATHETER, out, importer=mapping, base_family="gamma",
+    rep = run(cfg(catheter_dir, out, importer=mapping, base_family="gamma",
                   base_params={"constraint": "free", "fit_offset": True}, ukf_evidence=True))
     assert rep["summary"]["identification_runs"][0].count("data_1_") == 5
     assert len(rep["summary"]["heldout_runs"]) == 5

@@ -15,19 +15,18 @@ from rig_io.importer import find_files, import_file, load_mapping, manifest_for
 
 REPO = Path(__file__).resolve().parents[2]
 MAPPING = REPO / "conf" / "importer" / "tendon_catheter.yaml"
-CATHETER = Path("/work/shared/real-data/tendon-catheter")
 
 
 def _hashes(folder: Path) -> dict[str, str]:
     return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir())}
 
 
-def test_catheter_mapping_records_excitations() -> None:
+def test_catheter_mapping_records_excitations(catheter_dir: Path) -> None:
     m = load_mapping(MAPPING)
-    files = find_files(m, CATHETER)
+    files = find_files(m, catheter_dir)
     assert [f.name for f in files] == [f"data_{a}_{k}.txt" for a in (1, 2) for k in range(1, 6)]
-    one = manifest_for(m, CATHETER / "data_1_3.txt")
-    two = manifest_for(m, CATHETER / "data_2_5.txt")
+    one = manifest_for(m, catheter_dir / "data_1_3.txt")
+    two = manifest_for(m, catheter_dir / "data_2_5.txt")
     assert one["run_id"] == "catheter_data_1_3" and one["rig"] == "bending-joint"
     assert one["excitation"]["kind"] == "sine_decay_offset"
     assert one["excitation"]["role"] == "identification"
@@ -37,11 +36,11 @@ def test_catheter_mapping_records_excitations() -> None:
     assert one["configuration"] == {"curve_angle_deg": None, "radius_mm": None}
 
 
-def test_all_ten_catheter_runs_ingest(tmp_path: Path) -> None:
-    before = _hashes(CATHETER)
-    report = run_ingest(CATHETER, tmp_path / "out", mapping=load_mapping(MAPPING),
+def test_all_ten_catheter_runs_ingest(tmp_path: Path, catheter_dir: Path) -> None:
+    before = _hashes(catheter_dir)
+    report = run_ingest(catheter_dir, tmp_path / "out", mapping=load_mapping(MAPPING),
                         progress=False)
-    assert _hashes(CATHETER) == before  # read in place, never written
+    assert _hashes(catheter_dir) == before  # read in place, never written
     assert report["n_rejected"] == 0, report["rejected"]
     assert report["n_accepted"] == 10
     df = read_dataset(tmp_path / "out")
@@ -65,7 +64,7 @@ def test_all_ten_catheter_runs_ingest(tmp_path: Path) -> None:
     assert (kinds[kinds.index.str.contains("data_1_")] == "sine_decay_offset").all()
     assert (kinds[kinds.index.str.contains("data_2_")] == "sine_decay").all()
     # Incremental: nothing is processed again.
-    again = run_ingest(CATHETER, tmp_path / "out", mapping=load_mapping(MAPPING),
+    again = run_ingest(catheter_dir, tmp_path / "out", mapping=load_mapping(MAPPING),
                        progress=False)
     assert again["n_processed"] == 0 and again["n_accepted"] == 10
 
