@@ -3,7 +3,7 @@
     python -m pipelines.ingest                # data/raw/virtual -> data/processed/virtual
     python -m pipelines.ingest source=<dir> out=<dir>
     python -m pipelines.ingest importer=tendon_catheter \\
-        source=/work/shared/real-data/tendon-catheter out=data/processed/catheter
+        source=../shared/real-data/tendon-catheter out=data/processed/catheter
 
 Every run is read, checked, calibrated, synchronised and normalised by the pure functions of
 ``rig_io``; a bad run is rejected with its reason while the others go through. A run whose
