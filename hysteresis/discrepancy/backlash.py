@@ -30,7 +30,7 @@ from hysteresis.discrepancy.runs import RunData
 
 #: A dead zone is read when the dead travel is at least this fraction of the input span. On
 #: clean virtual-rig runs the reading is -0.08 to +0.02 mm (spans of 12 mm); the weakest dead
-#: zone tried (strength 0.5, 0.2 mm) reads 0.15-0.18 mm.
+#: zone tried (strength 0.5, 0.2 mm) reads 0.14-0.16 mm.
 MIN_DEAD_TRAVEL_FRACTION = 0.005
 
 
@@ -53,13 +53,6 @@ def turning_points(u: FloatArray, *, tol: float) -> list[int]:
     return out
 
 
-def pull_sign(run: RunData) -> float:
-    """+1 when a larger input pulls the tendon (the tension rises with it), -1 otherwise."""
-    assert run.tension is not None
-    c = float(np.cov(run.u, run.tension)[0, 1])
-    return 1.0 if c >= 0.0 else -1.0
-
-
 def dead_travels(run: RunData, *, lo: float = 0.1, hi: float = 0.4,
                  min_travel_fraction: float = 0.04) -> FloatArray | None:
     """Dead travel after every reversal of ``run`` (input units), or ``None`` without an input
@@ -74,7 +67,7 @@ def dead_travels(run: RunData, *, lo: float = 0.1, hi: float = 0.4,
         return None
     turns = turning_points(u, tol=0.02 * span)
     ends = [*turns[1:], u.size - 1]
-    sign = pull_sign(run)
+    sign = run.pull_sign
     out = []
     for i, j in zip(turns, ends, strict=True):
         du = np.abs(u[i:j + 1] - u[i])
@@ -90,7 +83,7 @@ def dead_travels(run: RunData, *, lo: float = 0.1, hi: float = 0.4,
         sel = np.flatnonzero(dt[: first + 1] >= lo * swing)
         if sel.size < 2 or np.ptp(dt[sel]) <= 0.0:
             continue
-        slope, intercept = np.polyfit(dt[sel], du[sel], 1)
+        _, intercept = np.polyfit(dt[sel], du[sel], 1)
         out.append(float(intercept))
     return np.asarray(out, dtype=np.float64)
 

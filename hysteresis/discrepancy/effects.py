@@ -227,10 +227,8 @@ class TendonElongation(Effect):
         # Floor for the log: a slack tendon reads ~0 N (load-cell noise may go negative).
         floor = max(0.02 * float(np.percentile(np.abs(t), 99)), 1e-6)
         lt = np.log(np.maximum(t, floor))
-        # Pulling is the direction of input travel that raises the input tension.
-        pull = float(np.sign(np.cov(ident.u, t)[0, 1])) if ident.tension is not None else 1.0
         return {"tension_scale": max(float(np.max(t**2)), 1e-12), "t_floor": floor,
-                "log_span": max(float(np.ptp(lt)), 1e-9), "pull_sign": pull or 1.0}
+                "log_span": max(float(np.ptp(lt)), 1e-9), "pull_sign": ident.pull_sign}
 
 
 class TimeDelay(Effect):

@@ -98,6 +98,14 @@ class RunData:
         """Direction of the last motion (+1 loading, -1 unloading; held through dwells)."""
         return direction(self.v, eps=self.v_eps)
 
+    @cached_property
+    def pull_sign(self) -> float:
+        """+1 when a larger input pulls the tendon (the input tension rises with it), -1 when
+        it releases it; +1 without an input tension."""
+        if self.tension is None:
+            return 1.0
+        return -1.0 if float(np.cov(self.u, self.tension)[0, 1]) < 0.0 else 1.0
+
     def decimated(self, factor: int) -> RunData:
         """Every ``factor``-th sample after a moving-average anti-alias filter."""
         if factor <= 1:
