@@ -20,7 +20,7 @@ take are scored once more and reported as ``measured_within_reach``: named, not 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -345,6 +345,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     failed: dict[str, str] = {}
     # The load cells' reading depends on the data only: made once, reused every round.
     load_cells = {n: corroboration(n, [g.ident for g in groups]) for n in remaining}
+    # The last round's scores, while they were made against the model as it stands.
+    final_scores: dict[str, dict[str, Any]] = {}
     for round_ in range(st.max_effects + 1):
         preds = [current.ident_pred.get(r.run_id, current.held_pred.get(r.run_id))
                  for r in all_runs]
@@ -371,6 +373,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                 failed[name] = str(err)
         scores.sort(key=lambda s: s["delta_bic"])
         rankings.append([_public(s) for s in scores])
+        final_scores = {s["name"]: s for s in scores}
         # A change the load cells show is measured, not inferred from the output:
         # an acceptable candidate with that corroboration goes ahead of the others.
         winner = next((s for s in scores if st.physical_evidence and _accept(s, st)
@@ -421,8 +424,10 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
             current = chosen["after"]
             evaluations.append(current)
             remaining.remove(chosen["name"])
+            final_scores = {}
     measured = (_measured_within_reach(remaining, load_cells, base_factory, groups, terms,
-                                       current, base_name, [e["name"] for e in effects], st)
+                                       current, base_name, [e["name"] for e in effects], st,
+                                       final_scores)
                 if st.physical_evidence else [])
     e_id0, e_h0 = evaluations[0].errors(groups)
     e_id1, e_h1 = current.errors(groups)
@@ -466,7 +471,8 @@ _CLAIM_TEXT = {
 def _measured_within_reach(remaining: Sequence[str], load_cells: dict[str, dict[str, Any]],
                            base_factory: BaseFactory, groups: Sequence[Group],
                            terms: dict[str, list[Term]], current: Evaluation, base_name: str,
-                           added: Sequence[str], st: WorkflowSettings) -> list[dict[str, Any]]:
+                           added: Sequence[str], st: WorkflowSettings,
+                           scored: Mapping[str, dict[str, Any]]) -> list[dict[str, Any]]:
     """Effects the load cells show but the final model did not take: named, not added.
 
     Two effects can leave the same mark on the output (an actuator dead zone and a
@@ -474,7 +480,8 @@ def _measured_within_reach(remaining: Sequence[str], load_cells: dict[str, dict[
     term added first reproduces both: the second one's term removes nothing more, so the output
     cannot name it. The load cells can (a dead travel at the reversals, a pull/release friction
     ratio). Each such effect is scored once more against the final model and reported with what
-    its term would do; it is not added, because it does not shrink the gap.
+    its term would do; it is not added, because it does not shrink the gap. ``scored``: the
+    scores already made against the final model (the search's last round), reused.
     """
     out: list[dict[str, Any]] = []
     h = [r for g in groups for r in g.heldout]
@@ -484,11 +491,13 @@ def _measured_within_reach(remaining: Sequence[str], load_cells: dict[str, dict[
         ev = load_cells.get(name, {})
         if not ev.get("corroborated"):
             continue
-        try:
-            s = score_candidate(CANDIDATES[name], base_factory, groups, terms, current, n_eff,
-                                ev, joint_retune=st.joint_retune)
-        except HysteresisError:
-            continue
+        s = scored.get(name)
+        if s is None:
+            try:
+                s = score_candidate(CANDIDATES[name], base_factory, groups, terms, current,
+                                    n_eff, ev, joint_retune=st.joint_retune)
+            except HysteresisError:
+                continue
         per = ev["per_configuration"]
         shown = ", ".join(f"{x:.3g}" if ev["claim"] != "dead_travel" else f"{100 * x:.1f} %"
                           for x in per.values())
