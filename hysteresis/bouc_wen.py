@@ -28,7 +28,6 @@ Inverses: ``"feedforward"`` is eq. 4 (``u_c = (y_d - beta h)/alpha`` with h driv
 from __future__ import annotations
 
 import math
-from contextlib import AbstractContextManager, nullcontext
 from typing import Any
 
 import numba
@@ -36,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import minimize
 
+from hysteresis._blas import single_thread_blas
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
@@ -378,17 +378,6 @@ def canonical_params(params: Any) -> FloatArray:
         raise HysteresisError(f"canonical form needs A > 0, got A = {a_}")
     s = a_ ** (n - 1.0)
     return np.array([1.0, b_ * s, c_ * s, n, alpha, beta * a_])
-
-
-def single_thread_blas() -> AbstractContextManager[Any]:
-    """Limit BLAS to one thread: L-BFGS-B's tiny BLAS calls otherwise spin OpenBLAS threads,
-    which costs more than the whole simulation on a shared 2-core machine."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl ships with the lock file
-        return nullcontext()
-    limiter: AbstractContextManager[Any] = threadpool_limits(limits=1, user_api="blas")
-    return limiter
 
 
 def decimation_index(u: FloatArray, max_samples: int) -> npt.NDArray[np.intp]:

@@ -34,6 +34,7 @@ import numba
 import numpy as np
 from scipy.optimize import differential_evolution, lsq_linear, minimize, minimize_scalar
 
+from hysteresis._blas import single_thread_blas
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
@@ -42,7 +43,7 @@ from hysteresis.base import (
     check_pair,
     register_family,
 )
-from hysteresis.bouc_wen import decimation_index, single_thread_blas
+from hysteresis.bouc_wen import decimation_index
 
 __all__ = ["ColemanHodgdonModel", "ch_simulate", "PAPER_PARAMS"]
 

@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
-from threadpoolctl import threadpool_limits
 
+from hysteresis._blas import single_thread_blas
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
@@ -147,7 +147,7 @@ class GammaModel(StatefulModel):
         if a.shape[0] < a.shape[1]:
             raise HysteresisError(f"need at least {a.shape[1]} samples to fit, got {a.shape[0]}")
         # tiny dense problem: BLAS threads only add contention (fits run in parallel)
-        with threadpool_limits(limits=1, user_api="blas"):
+        with single_thread_blas():
             if self.constraint == "free":
                 x, *_ = np.linalg.lstsq(a, yy, rcond=None)
                 lam = float("nan")

@@ -36,13 +36,13 @@ import numpy as np
 from scipy.optimize import differential_evolution, minimize
 from tqdm import tqdm
 
+from hysteresis._blas import single_thread_blas
 from hysteresis.base import FloatArray, HysteresisError, check_pair
 from hysteresis.bouc_wen import (
     PAPER_PENALTY,
     BoucWenModel,
     bw_simulate,
     paper_mse,
-    single_thread_blas,
 )
 
 __all__ = [

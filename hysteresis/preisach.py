@@ -38,8 +38,8 @@ from typing import Any
 import numpy as np
 from scipy.linalg import qr as scipy_qr
 from scipy.optimize import least_squares, nnls
-from threadpoolctl import threadpool_limits
 
+from hysteresis._blas import single_thread_blas
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
@@ -218,7 +218,7 @@ class PreisachModel(StatefulModel):
         target = yy[::every]
         # Small dense algebra: BLAS threads only add contention (the pipeline already fits
         # configurations in parallel), so identification runs single-threaded.
-        with threadpool_limits(limits=1, user_api="blas"):
+        with single_thread_blas():
             if self.density == "nonparametric":
                 self._fit_nonparametric(rows, target, uu[::every])
             else:

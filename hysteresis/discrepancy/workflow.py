@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from hysteresis._blas import single_thread_blas
 from hysteresis.base import HysteresisError, HysteresisModel
 from hysteresis.discrepancy._ops import FloatArray
 from hysteresis.discrepancy.effects import (
@@ -310,9 +311,7 @@ def run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_nam
                  model_error: dict[str, FloatArray] | None = None) -> dict[str, Any]:
     """The whole workflow (see :func:`_run_workflow`), BLAS pinned to one thread: the problems
     are thousands of tiny least-squares solves where threads only add contention."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
+    with single_thread_blas():
         return _run_workflow(runs, base_factory, base_name=base_name, settings=settings,
                              model_error=model_error)
 

@@ -1,0 +1,28 @@
+"""The shared one-BLAS-thread limit: it limits inside the block and restores after."""
+
+from __future__ import annotations
+
+from threadpoolctl import threadpool_info
+
+from hysteresis._blas import single_thread_blas
+
+
+def _blas_threads() -> list[int]:
+    return [int(lib["num_threads"]) for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+
+def test_limits_blas_to_one_thread_and_restores_the_previous_count() -> None:
+    before = _blas_threads()
+    assert before, "numpy's BLAS is not visible to threadpoolctl"
+    with single_thread_blas():
+        assert _blas_threads() == [1] * len(before)
+    assert _blas_threads() == before
+
+
+def test_nested_limits_restore_in_order() -> None:
+    before = _blas_threads()
+    with single_thread_blas():
+        with single_thread_blas():
+            assert _blas_threads() == [1] * len(before)
+        assert _blas_threads() == [1] * len(before)
+    assert _blas_threads() == before
