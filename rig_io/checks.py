@@ -31,7 +31,7 @@ def check_timestamps(t_ns: npt.NDArray[np.int64], *, run: str, file: str,
     """Timestamps strictly increase and have no gap longer than 10 sample periods; a
     sampled stream needs ``min_samples`` (2: one sample has no rate and cannot be resampled)."""
     if t_ns.size == 0:
-        raise RigIOError("no samples", run=run, file=file)
+        raise RigIOError("no samples", run=run, file=file, key="t_ns")
     if t_ns.size < min_samples:
         raise RigIOError(f"only {t_ns.size} sample(s); a sampled stream needs at least "
                          f"{min_samples}", run=run, file=file, row=_row(0, rows),
@@ -92,7 +92,8 @@ def check_confident(frame: pd.DataFrame, *, run: str, file: str) -> None:
     ok = np.isfinite(value) & np.isfinite(conf) & (conf > 0)
     if not ok.any():
         raise RigIOError(f"no confident frame among {len(frame)} frames "
-                         "(every frame has confidence 0 or no value)", run=run, file=file)
+                         "(every frame has confidence 0 or no value)", run=run, file=file,
+                     key="confidence")
 
 
 def check_overlap(frame: pd.DataFrame, t_encoder: npt.NDArray[np.int64], *, stream: str,
@@ -113,12 +114,15 @@ def check_overlap(frame: pd.DataFrame, t_encoder: npt.NDArray[np.int64], *, stre
         raise RigIOError(
             f"{stream} samples (t={int(t[0]) / 1e9:.3f}..{int(t[-1]) / 1e9:.3f} s) do not "
             f"overlap the encoder (t={lo / 1e9:.3f}..{hi / 1e9:.3f} s): {inside} inside",
-            run=run, file=file)
+            run=run, file=file, key="t_ns")
 
 
 #: Largest |position| accepted, by unit: 10 m of tendon or follower travel, 1000 turns of a
 #: motor or joint angle. Beyond that a value is corruption, not motion.
 MAX_ABS_POSITION = {"mm": 1e4, "deg": 3.6e5}
+#: Fastest encoder motion accepted, by unit (per second): 10 m/s of tendon, 1e6 deg/s. A
+#: corrupt count that stays inside the counter's range shows up as a jump beyond this.
+MAX_SPEED = {"mm": 1e4, "deg": 1e6}
 #: Largest |tension| without a declared load-cell range (N).
 MAX_ABS_TENSION_N = 1e5
 
@@ -137,6 +141,8 @@ def check_physical_values(run: PhysicalRun, *, rows: bool = False) -> None:
         v = enc[col].to_numpy(dtype=float)
         _finite_within(v, t, limit=limit, nullable=nullable, what=f"{col} position ({unit})",
                        key=col, run=run_id, file=run.file("encoder"), rows=rows)
+        _speed_within(v, t, limit=MAX_SPEED.get(unit, MAX_SPEED["mm"]), unit=unit, key=col,
+                      run=run_id, file=run.file("encoder"), rows=rows)
     if run.loadcell is not None:
         tl = run.loadcell["t_ns"].to_numpy(dtype=np.int64)
         for col in ("tension_in_n", "tension_out_n"):
@@ -157,9 +163,25 @@ def check_physical_values(run: PhysicalRun, *, rows: bool = False) -> None:
         bad = np.flatnonzero(~((conf >= 0.0) & (conf <= 1.0)))
         if bad.size:
             i = int(bad[0])
-            raise RigIOError(f"confidence {conf[i]!r} outside [0, 1]", run=run_id,
+            raise RigIOError(f"confidence {float(conf[i])!r} outside [0, 1]", run=run_id,
                              file=run.file(name), key="confidence", row=_row(i, rows),
                              t_ns=int(tv[i]))
+
+
+def _speed_within(v: npt.NDArray[np.float64], t: npt.NDArray[np.int64], *, limit: float,
+                  unit: str, key: str, run: str, file: str, rows: bool) -> None:
+    if v.size < 2:
+        return
+    dt = np.diff(t).astype(float) / 1e9
+    with np.errstate(invalid="ignore", divide="ignore"):
+        speed = np.abs(np.diff(v)) / dt
+    fast = np.flatnonzero((dt > 0) & (speed > limit))
+    if fast.size:
+        i = int(fast[0]) + 1
+        raise RigIOError(f"{key} jumps by {v[i] - v[i - 1]:.6g} {unit} in {dt[i - 1] * 1e3:.3g}"
+                         f" ms ({speed[i - 1]:.3g} {unit}/s, beyond {limit:g}): a corrupt "
+                         "value, not motion", run=run, file=file, key=key, row=_row(i, rows),
+                         t_ns=int(t[i]))
 
 
 def _finite_within(v: npt.NDArray[np.float64], t: npt.NDArray[np.int64], *, limit: float,
@@ -171,7 +193,7 @@ def _finite_within(v: npt.NDArray[np.float64], t: npt.NDArray[np.int64], *, limi
         bad |= finite & (np.abs(v) > limit)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise RigIOError(f"{what} {v[i]!r} is not finite or beyond +-{limit:g}",
+        raise RigIOError(f"{what} {float(v[i])!r} is not finite or beyond +-{limit:g}",
                          run=run, file=file, key=key, row=_row(i, rows), t_ns=int(t[i]))
 
 

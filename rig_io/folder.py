@@ -215,7 +215,7 @@ def read_stream_csv(path: str | os.PathLike[str], name: str, *, run: str,
         line = data[: err.start].count(b"\n") + 1
         raise RigIOError("not valid UTF-8", run=run, file=file, row=line) from None
     if not data or data.isspace():
-        raise RigIOError("empty file", run=run, file=file)
+        raise RigIOError("empty file", run=run, file=file, row=1)
     nul = data.find(b"\0")
     if nul >= 0:
         raise RigIOError("NUL byte in a text file", run=run, file=file,
@@ -233,7 +233,8 @@ def read_stream_csv(path: str | os.PathLike[str], name: str, *, run: str,
                          key=missing[0])
     body = data[header_end + 1:] if header_end >= 0 else b""
     if not body or body.isspace():
-        raise RigIOError("no data rows after the header", run=run, file=file)
+        raise RigIOError("no data rows after the header", run=run, file=file,
+                         row=checks.FIRST_DATA_LINE)
     if not data.endswith(b"\n"):
         last = body[body.rfind(b"\n") + 1:].decode("utf-8", "replace")
         raise RigIOError(f"truncated last line {short(last)} (no line terminator)",
@@ -285,9 +286,12 @@ def _check_field_counts(body: bytes, header: list[str], *, quoted: bool, run: st
     n = int(counts[i])
     if n > expected:
         fields = line.split(",")
-        for j in range(min(len(fields) - 1, expected)):
-            if (_DECIMAL_COMMA.fullmatch(fields[j].strip())
-                    and fields[j + 1].strip().isdigit()):
+        # A decimal comma splits a real-valued column (integer columns have no decimals).
+        candidates = [j for j in range(min(len(fields) - 1, expected))
+                      if _DECIMAL_COMMA.fullmatch(fields[j].strip())
+                      and fields[j + 1].strip().isdigit()]
+        candidates.sort(key=lambda j: header[j] in _INTEGER)
+        for j in candidates[:1]:
                 raise RigIOError(
                     f"{n} fields, expected {expected}: {short(fields[j] + ',' + fields[j + 1])}"
                     f" in column {header[j]} looks like a decimal comma (the format uses '.')",
