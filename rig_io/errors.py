@@ -12,7 +12,10 @@ MAX_VALUE_CHARS = 60
 
 
 def short(value: Any, limit: int = MAX_VALUE_CHARS) -> str:
-    """``repr(value)``, cut to ``limit`` characters with its full length noted."""
+    """``repr(value)``, cut to ``limit`` characters with its full length noted (numpy
+    scalars shown as the Python number they hold)."""
+    if type(value).__module__ == "numpy" and hasattr(value, "item"):
+        value = value.item()
     text = repr(value)
     if len(text) <= limit:
         return text

@@ -265,7 +265,9 @@ def _check_field_counts(body: bytes, header: list[str], *, quoted: bool, run: st
         reader = csv.reader(line.rstrip("\r") for line in lines)
         counts = np.array([len(r) if r else 1 for r in reader], dtype=np.int64)
         if counts.size != len(lines):  # a quote spanning lines
-            raise RigIOError("unbalanced quote in a field", run=run, file=file)
+            odd = next((k for k, line in enumerate(lines) if line.count('"') % 2), 0)
+            raise RigIOError(f"unbalanced quote in {short(lines[odd])}", run=run,
+                             file=file, row=odd + checks.FIRST_DATA_LINE)
     else:
         arr = np.frombuffer(body, dtype=np.uint8)
         ends = np.flatnonzero(arr == 10)

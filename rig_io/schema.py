@@ -6,12 +6,14 @@ Documented in ``docs/dataset-schema.md``; bump :data:`SCHEMA_VERSION` when it ch
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 import pandas as pd
 import pandera.pandas as pa
 import pyarrow as pa_arrow
 
-from rig_io.errors import RigIOError
+from rig_io.errors import RigIOError, short
 from rig_io.run import EVENT_KINDS
 
 SCHEMA_VERSION = "1"
@@ -109,6 +111,7 @@ def counter_range(bits: int) -> tuple[int, int]:
     return -(1 << (bits - 1)), (1 << bits) - 1
 
 
+@cache
 def raw_stream_schema(name: str, *, counter_bits: int | None = None) -> pa.DataFrameSchema:
     """The declared schema of one typed raw stream (after the reader's parsing).
 
@@ -162,6 +165,7 @@ def validate_stream(frame: pd.DataFrame, name: str, *, run: str, file: str,
         if isinstance(cases, pd.DataFrame) and len(cases):
             index = cases["index"].iloc[0] if "index" in cases else None
             value = cases["failure_case"].iloc[0] if "failure_case" in cases else None
+            value = value.item() if isinstance(value, np.generic) else value
             if index is not None and first_row is not None and not pd.isna(index):
                 row = int(index) + first_row
         check = err.check
@@ -169,5 +173,5 @@ def validate_stream(frame: pd.DataFrame, name: str, *, run: str, file: str,
                 else str(check) if check is not None else "invalid")
         if what == "not_nullable":
             what = "empty or missing value where one is required"
-        raise RigIOError(f"{col} = {value!r}: {what}", run=run, file=file, key=str(col),
+        raise RigIOError(f"{col} = {short(value)}: {what}", run=run, file=file, key=str(col),
                          row=row) from None

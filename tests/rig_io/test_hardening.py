@@ -325,3 +325,26 @@ def test_limits_from_config() -> None:
         ReadLimits.from_mapping({"max_files": 5})
     with pytest.raises(RigIOError, match="positive"):
         ReadLimits.from_mapping({"max_bag_mb": -1})
+
+
+def test_ingest_batch_with_hostile_runs_writes_nothing_outside(tmp_path: Path) -> None:
+    from pipelines.ingest import run_ingest
+
+    src = tmp_path / "src"
+    good = plain_copy(src, "good")
+    escape = plain_copy(src, "escape")
+    _set(escape, "run_id", "../../escaped")
+    fifo = plain_copy(src, "fifo")
+    (fifo / "events.csv").unlink()
+    os.mkfifo(fifo / "events.csv")
+    _set(fifo, "run_id", "fifo_run")
+    _set(good, "run_id", "good_run")
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    report = _with_timeout(lambda: run_ingest(src, tmp_path / "out", progress=False), 60)
+    assert report["n_accepted"] == 1 and report["n_rejected"] == 2
+    reasons = " | ".join(r["reason"] for r in report["rejected"])
+    assert "key run_id" in reasons and "FIFO" in reasons
+    after = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")
+                   if not p.is_relative_to(tmp_path / "out"))
+    assert after == [p for p in before if p != Path("out")]
+    assert [p.name for p in (tmp_path / "out" / "samples").iterdir()] == ["good_run.parquet"]
