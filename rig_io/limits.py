@@ -29,15 +29,17 @@ MB = 1024 * 1024
 class ReadLimits:
     """Upper bounds on what one run may make ingest read (``conf/ingest.yaml`` -> ``limits``).
 
-    The defaults keep the memory of reading one run well under 1 GB (a stream is parsed from
-    its text, so the peak is a few times the decompressed size) and still hold runs of more
-    than an hour: an hour of 1 kHz load cell is ~110 MB of CSV text.
+    The defaults keep the peak memory of ingesting one run under 1 GB (measured in
+    ``bench/bench_ingest.py``: a 37 MB encoder.csv, 1.45 M samples, peaks at ~0.76 GB, as the
+    processed rows take ~0.35 kB per encoder sample) and still hold long runs: 40 MB is ~4 h
+    of a 100 Hz encoder or ~19 min of a 1 kHz load cell. Raise them for longer runs on a
+    machine with the memory.
     """
 
     #: One stream file (``.csv`` or ``.csv.gz``) on disk, and a foreign log file.
-    max_file_mb: float = 160.0
+    max_file_mb: float = 40.0
     #: The text of one ``.csv.gz`` after decompression.
-    max_decompressed_mb: float = 160.0
+    max_decompressed_mb: float = 40.0
     #: ``manifest.json`` (and a bag's side-car manifest).
     max_manifest_mb: float = 1.0
     #: A bag (all files of a rosbag2 folder together): rosbags holds its messages in memory.
