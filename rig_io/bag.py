@@ -343,6 +343,11 @@ def _physical(decoded: dict[str, dict[str, Any]], topics: set[str], p: Path, hin
                        files={s: file for s in ("encoder", "loadcell", "camera", "tracker",
                                                 "events")})
     if T_LOAD_IN in decoded or T_LOAD_OUT in decoded:
+        for topic in (T_LOAD_IN, T_LOAD_OUT):
+            if topic in decoded:  # ordered stamps first: merging repeats would multiply rows
+                checks.check_timestamps(np.asarray(decoded[topic]["stamp"], dtype=np.int64),
+                                        run=run_id, file=f"{file}:{topic}", rows=False,
+                                        check_gaps=False)
         phys.loadcell = _loads(decoded.get(T_LOAD_IN), decoded.get(T_LOAD_OUT))
     for stream, topic in (("camera", T_CAMERA), ("tracker", T_TRACKER)):
         if topic in decoded:

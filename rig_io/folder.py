@@ -86,7 +86,8 @@ def find_stream(folder: Path, name: str) -> Path | None:
     plain, gz = folder / f"{name}.csv", folder / f"{name}.csv.gz"
     has_plain, has_gz = os.path.lexists(plain), os.path.lexists(gz)
     if has_plain and has_gz:
-        raise RigIOError(f"both {plain.name} and {gz.name} exist", file=str(folder))
+        raise RigIOError(f"both {plain.name} and {gz.name} exist", run=folder.name,
+                         file=str(folder), key=name)
     if has_plain:
         return plain
     if has_gz:

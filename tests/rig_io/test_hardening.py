@@ -348,3 +348,20 @@ def test_ingest_batch_with_hostile_runs_writes_nothing_outside(tmp_path: Path) -
                    if not p.is_relative_to(tmp_path / "out"))
     assert after == [p for p in before if p != Path("out")]
     assert [p.name for p in (tmp_path / "out" / "samples").iterdir()] == ["good_run.parquet"]
+
+
+def test_bag_with_repeated_load_stamps_is_rejected_before_merging(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from rig_io.bag import write_bag
+    from rig_io.synthetic import make_raw_run
+
+    run = make_raw_run("rep_0001", duration_s=2.0, with_camera=False)
+    assert run.loadcell is not None
+    lc = run.loadcell.copy()
+    lc["t_ns"] = 0  # every message at one stamp: an outer merge would square the rows
+    bag = write_bag(replace(run, loadcell=lc), tmp_path / "rep.bag")
+    with pytest.raises(RigIOError, match="repeats") as info:
+        read_bag(bag)
+    assert info.value.file is not None and info.value.file.startswith(str(bag))
+    assert info.value.t_ns == 0
