@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 from rig_io.errors import RigIOError
 from tests.rig_io.hardening_util import (
+    SAMPLE_FOLDER,
     assert_names_where,
     assert_sound,
     folder_source,
@@ -125,4 +126,30 @@ def test_csv_mutations(base: Path, m: tuple[str, str, int, int, str]) -> None:
     event(f"accepted {stream} {kind}")
     assert not _must_reject(stream, kind, column, value), (
         f"accepted {value!r} in {stream}.{column}")
+    assert_sound(frame)
+
+
+GZ = (SAMPLE_FOLDER / "encoder.csv.gz").read_bytes()
+
+
+@settings(FUZZ, max_examples=60)
+@given(cut=st.integers(0, len(GZ)), flips=st.lists(
+    st.tuples(st.integers(0, len(GZ) - 1), st.integers(0, 7)), max_size=3))
+def test_gzip_stream_damage(base: Path, cut: int, flips: list[tuple[int, int]]) -> None:
+    data = bytearray(GZ[:cut] if cut < len(GZ) else GZ)
+    for pos, bit in flips:
+        if pos < len(data):
+            data[pos] ^= 1 << bit
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / base.name
+        shutil.copytree(base, folder)
+        (folder / "encoder.csv").unlink()
+        (folder / "encoder.csv.gz").write_bytes(bytes(data))
+        try:
+            frame = ingest_one(folder_source(folder))
+        except RigIOError as err:
+            assert_names_where(err)
+            event(f"rejected: {err.reason[:30]}")
+            return
+    event("accepted")
     assert_sound(frame)
