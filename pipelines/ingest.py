@@ -30,6 +30,7 @@ from rig_io.atomic import write_text_atomic
 from rig_io.dataset import REPORT, SAMPLES, read_runs, run_file, write_run_rows, write_runs
 from rig_io.errors import RigIOError
 from rig_io.importer import IMPORTER_VERSION, load_mapping
+from rig_io.limits import ReadLimits
 from rig_io.process import INGEST_VERSION, process_run
 from rig_io.sources import Source, discover, hash_files, load
 from rig_io.synchronise import SyncOptions
@@ -44,7 +45,7 @@ def options_hash(sync: SyncOptions, mapping: dict[str, Any] | None) -> str:
 def run_ingest(source: str | Path, out: str | Path, *,
                mapping: Mapping[str, Any] | None = None,
                sync: SyncOptions | None = None, force: bool = False, prune: bool = True,
-               progress: bool = True) -> dict[str, Any]:
+               progress: bool = True, limits: ReadLimits | None = None) -> dict[str, Any]:
     """Ingest every run under ``source`` into ``out``; return the report (also written)."""
     started = time.perf_counter()
     src, dst = Path(source).resolve(), Path(out).resolve()
@@ -80,7 +81,7 @@ def run_ingest(source: str | Path, out: str | Path, *,
                              "n_samples": cached[1].get("n_samples")})
             continue
         try:
-            phys = load(s, mapping=plain)
+            phys = load(s, mapping=plain, limits=limits or ReadLimits())
             if phys.run_id in runs:
                 raise RigIOError(f"duplicate run_id: already ingested from "
                                  f"{runs[phys.run_id]['source_key']!r}", run=phys.run_id,
@@ -96,7 +97,8 @@ def run_ingest(source: str | Path, out: str | Path, *,
             continue
         except Exception as err:  # one broken run must not stop the batch
             rejected.append(_rejection(s, key, RigIOError(
-                f"unexpected {type(err).__name__}: {err}", file=str(s.path))))
+                f"{type(err).__name__} while processing: {err}", run=s.path.name,
+                file=str(s.path))))
             continue
         runs[phys.run_id] = meta
         accepted.append({"run_id": phys.run_id, "source": key, "status": "processed",
@@ -133,6 +135,13 @@ def _prune(dst: Path, runs: dict[str, dict[str, Any]]) -> list[str]:
     return removed
 
 
+def _plain_limits(section: Any) -> dict[str, Any]:
+    from omegaconf import OmegaConf
+
+    loaded = OmegaConf.to_container(section, resolve=True) if section is not None else {}
+    return {str(k): v for k, v in loaded.items()} if isinstance(loaded, dict) else {}
+
+
 def _main() -> None:
     import hydra
     from omegaconf import DictConfig, OmegaConf
@@ -153,7 +162,8 @@ def _main() -> None:
             report = run_ingest(to_absolute_path(str(cfg.source)),
                                 to_absolute_path(str(cfg.out)), mapping=mapping, sync=sync,
                                 force=bool(cfg.force), prune=bool(cfg.prune),
-                                progress=bool(cfg.progress))
+                                progress=bool(cfg.progress), limits=ReadLimits.from_mapping(
+                                    _plain_limits(cfg.get("limits"))))
         except RigIOError as err:
             print(f"ingest: {err}", file=sys.stderr)
             raise SystemExit(2) from None

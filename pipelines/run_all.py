@@ -156,13 +156,15 @@ def run_ingest_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
     (``python -m pipelines.ingest`` alone exits 1 instead).
     """
     from pipelines.ingest import run_ingest
+    from rig_io.limits import ReadLimits
     from rig_io.synchronise import SyncOptions
 
     icfg = compose_stage("ingest", stage_overrides("ingest", pipeline))
     report: dict[str, Any] = run_ingest(
         str(icfg["source"]), str(icfg["out"]), mapping=icfg.get("importer"),
         sync=SyncOptions(**dict(icfg.get("sync") or {})), force=bool(icfg.get("force", False)),
-        prune=bool(icfg.get("prune", True)), progress=bool(icfg.get("progress", True)))
+        prune=bool(icfg.get("prune", True)), progress=bool(icfg.get("progress", True)),
+        limits=ReadLimits.from_mapping(dict(icfg.get("limits") or {})))
     for rej in report.get("rejected", []):
         log.warning("ingest rejected %s: %s", rej.get("source"), rej.get("reason"))
     if not report.get("n_accepted"):

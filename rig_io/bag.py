@@ -41,6 +41,7 @@ from rig_io.calibrate import (
     vision_unit,
 )
 from rig_io.errors import RigIOError
+from rig_io.limits import DEFAULT_LIMITS, MB, ReadLimits, check_regular, read_bytes
 from rig_io.manifest import check_manifest, parse_manifest
 from rig_io.run import EVENT_KINDS, RawRun
 
@@ -261,18 +262,36 @@ def sidecar_manifest(path: str | os.PathLike[str]) -> Path:
     return p.with_name(f"{p.name}.manifest.json")
 
 
-def read_bag(path: str | os.PathLike[str], *, check: bool = True) -> PhysicalRun:
+def _check_bag_files(p: Path, hint: str, limits: ReadLimits) -> None:
+    """Only regular files, within the size limit (rosbags holds the messages in memory)."""
+    if p.is_dir():
+        files = sorted(f for f in p.iterdir() if not f.name.startswith("."))
+        sizes = [check_regular(f, base=p, run=hint).st_size for f in files]
+    else:
+        sizes = [check_regular(p, base=None, run=hint).st_size]
+    total = sum(sizes)
+    if total > limits.max_bag_mb * MB:
+        raise RigIOError(f"bag is {total / MB:.1f} MB, beyond the limit of "
+                         f"{limits.max_bag_mb:g} MB (limits.max_bag_mb)", run=hint,
+                         file=str(p))
+
+
+def read_bag(path: str | os.PathLike[str], *, check: bool = True,
+             limits: ReadLimits = DEFAULT_LIMITS) -> PhysicalRun:
     """Read a bag into a :class:`PhysicalRun` in the manifest's units.
 
     Raises :class:`RigIOError` for a truncated or corrupt bag, a missing required topic, a
     missing manifest (neither ``/rig/manifest`` nor ``<bag>.manifest.json``) and, with
-    ``check``, the value checks (timestamps, gaps, saturation, e-stop, camera confidence).
+    ``check``, the value checks (timestamps, gaps, saturation, e-stop, camera confidence,
+    finite values in physical ranges, stream overlap). ``limits`` bounds the bag's size;
+    special files are refused.
     """
     p = Path(path)
     file = str(p)
     hint = p.name.removesuffix(".bag")
-    if not p.exists():
+    if not os.path.lexists(p):
         raise RigIOError("bag does not exist", run=hint, file=file)
+    _check_bag_files(p, hint, limits)
     raw: dict[str, tuple[str, list[int], list[bytes]]] = {}
     last_t: int | None = None
     try:
@@ -289,17 +308,31 @@ def read_bag(path: str | os.PathLike[str], *, check: bool = True) -> PhysicalRun
             cdr = reader.is2
             decoded = {topic: _decode(reader, topic, typ, stamps, datas, cdr=cdr)
                        for topic, (typ, stamps, datas) in raw.items()}
-    except RigIOError:
-        raise
+    except RigIOError as err:
+        if err.file is not None:
+            raise
+        raise RigIOError(err.reason, run=hint, file=file, key=err.key, t_ns=last_t) from None
     except Exception as err:  # rosbags raises many types for damaged storage
         where = f" after the message at t={last_t} ns" if last_t is not None else ""
         raise RigIOError(f"truncated or corrupt bag{where}: {type(err).__name__}: {err}",
                          run=hint, file=file, t_ns=last_t) from None
+    try:
+        return _physical(decoded, topics, p, hint, check=check, limits=limits)
+    except RigIOError:
+        raise
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError, OverflowError,
+            UnicodeError) as err:  # a message that decodes but does not fit the format
+        raise RigIOError(f"corrupt bag content: {type(err).__name__}: {err}", run=hint,
+                         file=file) from None
 
-    manifest = _bag_manifest(decoded, p, hint)
-    run_id = str(manifest["run_id"])
+
+def _physical(decoded: dict[str, dict[str, Any]], topics: set[str], p: Path, hint: str, *,
+              check: bool, limits: ReadLimits) -> PhysicalRun:
+    file = str(p)
+    manifest = _bag_manifest(decoded, p, hint, limits)
     present = [s for s, t in (("camera", T_CAMERA), ("tracker", T_TRACKER)) if t in topics]
-    check_manifest(manifest, file=file, streams=present, si_units=True, run_hint=hint)
+    run_id = check_manifest(manifest, file=file, streams=present, si_units=True,
+                            run_hint=hint)
     for topic in REQUIRED_TOPICS:
         if topic not in decoded or not len(decoded[topic]["stamp"]):
             raise RigIOError(f"required topic {topic} is missing or empty "
@@ -310,6 +343,11 @@ def read_bag(path: str | os.PathLike[str], *, check: bool = True) -> PhysicalRun
                        files={s: file for s in ("encoder", "loadcell", "camera", "tracker",
                                                 "events")})
     if T_LOAD_IN in decoded or T_LOAD_OUT in decoded:
+        for topic in (T_LOAD_IN, T_LOAD_OUT):
+            if topic in decoded:  # ordered stamps first: merging repeats would multiply rows
+                checks.check_timestamps(np.asarray(decoded[topic]["stamp"], dtype=np.int64),
+                                        run=run_id, file=f"{file}:{topic}", rows=False,
+                                        check_gaps=False)
         phys.loadcell = _loads(decoded.get(T_LOAD_IN), decoded.get(T_LOAD_OUT))
     for stream, topic in (("camera", T_CAMERA), ("tracker", T_TRACKER)):
         if topic in decoded:
@@ -443,7 +481,8 @@ def _decode(reader: AnyReader, topic: str, typ: str, stamps: list[int], datas: l
     elif typ == MSG_JOINTS:
         _joint_rows(out, msgs)
     else:
-        raise RigIOError(f"unexpected message type {typ} on {topic}")
+        raise RigIOError(f"message type {typ} on {topic} is not one ingest reads "
+                         f"({MSG_WRENCH} or {MSG_JOINTS})", key=topic)
     return out
 
 
@@ -497,18 +536,20 @@ def _stamp(msg: Any) -> int:
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
-def _bag_manifest(decoded: dict[str, dict[str, Any]], p: Path,
-                  hint: str) -> dict[str, Any]:
+def _bag_manifest(decoded: dict[str, dict[str, Any]], p: Path, hint: str,
+                  limits: ReadLimits) -> dict[str, Any]:
     msgs = decoded.get(T_MANIFEST, {}).get("msgs", [])
     if msgs:
         return parse_manifest(str(msgs[0].data), run=hint, file=f"{p}:{T_MANIFEST}")
     side = sidecar_manifest(p)
-    if not side.is_file():
+    if not os.path.lexists(side):
         raise RigIOError(f"required topic {T_MANIFEST} is missing and there is no "
                          f"{side.name} beside the bag", run=hint, file=str(p))
+    data = read_bytes(side, base=side.parent, run=hint, limit_mb=limits.max_manifest_mb,
+                      limit_name="max_manifest_mb")
     try:
-        text = side.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as err:
         raise RigIOError(f"unreadable manifest: {err}", run=hint, file=str(side)) from None
     return parse_manifest(text, run=hint, file=str(side))
 

@@ -27,10 +27,15 @@ def _row(i: int, rows: bool) -> int | None:
 
 def check_timestamps(t_ns: npt.NDArray[np.int64], *, run: str, file: str,
                      check_gaps: bool = True, rows: bool = True,
-                     max_gap_periods: float = MAX_GAP_PERIODS) -> None:
-    """Timestamps strictly increase and have no gap longer than 10 sample periods."""
+                     max_gap_periods: float = MAX_GAP_PERIODS, min_samples: int = 1) -> None:
+    """Timestamps strictly increase and have no gap longer than 10 sample periods; a
+    sampled stream needs ``min_samples`` (2: one sample has no rate and cannot be resampled)."""
     if t_ns.size == 0:
-        raise RigIOError("no samples", run=run, file=file)
+        raise RigIOError("no samples", run=run, file=file, key="t_ns")
+    if t_ns.size < min_samples:
+        raise RigIOError(f"only {t_ns.size} sample(s); a sampled stream needs at least "
+                         f"{min_samples}", run=run, file=file, row=_row(0, rows),
+                         t_ns=int(t_ns[0]))
     dt = np.diff(t_ns)
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
@@ -87,7 +92,109 @@ def check_confident(frame: pd.DataFrame, *, run: str, file: str) -> None:
     ok = np.isfinite(value) & np.isfinite(conf) & (conf > 0)
     if not ok.any():
         raise RigIOError(f"no confident frame among {len(frame)} frames "
-                         "(every frame has confidence 0 or no value)", run=run, file=file)
+                         "(every frame has confidence 0 or no value)", run=run, file=file,
+                     key="confidence")
+
+
+def check_overlap(frame: pd.DataFrame, t_encoder: npt.NDArray[np.int64], *, stream: str,
+                  run: str, file: str) -> None:
+    """A load cell, camera or tracker stream must share time with the encoder: at least two
+    of its (confident, measured) samples lie inside the encoder's span. A stream stamped on
+    another clock otherwise resamples to nothing, or (camera) to a constant."""
+    t = frame["t_ns"].to_numpy(dtype=np.int64)
+    if stream in ("camera", "tracker"):
+        value = pd.to_numeric(frame["value"], errors="coerce").to_numpy(dtype=float)
+        conf = pd.to_numeric(frame["confidence"], errors="coerce").to_numpy(dtype=float)
+        t = t[np.isfinite(value) & np.isfinite(conf) & (conf > 0)]
+    if t.size == 0 or t_encoder.size == 0:
+        return  # reported by the confidence and timestamp checks
+    lo, hi = int(t_encoder[0]), int(t_encoder[-1])
+    inside = int(np.count_nonzero((t >= lo) & (t <= hi)))
+    if inside < 2:
+        raise RigIOError(
+            f"{stream} samples (t={int(t[0]) / 1e9:.3f}..{int(t[-1]) / 1e9:.3f} s) do not "
+            f"overlap the encoder (t={lo / 1e9:.3f}..{hi / 1e9:.3f} s): {inside} inside",
+            run=run, file=file, key="t_ns")
+
+
+#: Largest |position| accepted, by unit: 10 m of tendon or follower travel, 1000 turns of a
+#: motor or joint angle. Beyond that a value is corruption, not motion.
+MAX_ABS_POSITION = {"mm": 1e4, "deg": 3.6e5}
+#: Fastest encoder motion accepted, by unit (per second): 10 m/s of tendon, 1e6 deg/s. A
+#: corrupt count that stays inside the counter's range shows up as a jump beyond this.
+MAX_SPEED = {"mm": 1e4, "deg": 1e6}
+#: Largest |tension| without a declared load-cell range (N).
+MAX_ABS_TENSION_N = 1e5
+
+
+def check_physical_values(run: PhysicalRun, *, rows: bool = False) -> None:
+    """Calibrated values are finite and within physical ranges (a corrupt count, a bit flip
+    in a bag's float, a counter wrongly declared): the input everywhere, the output encoder
+    where measured, tensions, camera/tracker values where measured, confidence in [0, 1]."""
+    run_id = run.run_id
+    channels = run.manifest.get("channels") or {}
+    unit = str((channels.get("encoder") or {}).get("unit", "mm"))
+    limit = MAX_ABS_POSITION.get(unit, MAX_ABS_POSITION["mm"])
+    enc = run.encoder
+    t = enc["t_ns"].to_numpy(dtype=np.int64)
+    for col, nullable in (("input", False), ("output", True)):
+        v = enc[col].to_numpy(dtype=float)
+        _finite_within(v, t, limit=limit, nullable=nullable, what=f"{col} position ({unit})",
+                       key=col, run=run_id, file=run.file("encoder"), rows=rows)
+        _speed_within(v, t, limit=MAX_SPEED.get(unit, MAX_SPEED["mm"]), unit=unit, key=col,
+                      run=run_id, file=run.file("encoder"), rows=rows)
+    if run.loadcell is not None:
+        tl = run.loadcell["t_ns"].to_numpy(dtype=np.int64)
+        for col in ("tension_in_n", "tension_out_n"):
+            _finite_within(run.loadcell[col].to_numpy(dtype=float), tl,
+                           limit=MAX_ABS_TENSION_N, nullable=True, what="tension (N)",
+                           key=col, run=run_id, file=run.file("loadcell"), rows=rows)
+    for name in ("camera", "tracker"):
+        frame = getattr(run, name)
+        if frame is None:
+            continue
+        tv = frame["t_ns"].to_numpy(dtype=np.int64)
+        quantity = str((channels.get(name) or {}).get("quantity", "output_mm"))
+        vlimit = MAX_ABS_POSITION["deg" if quantity.endswith("_deg") else "mm"]
+        _finite_within(frame["value"].to_numpy(dtype=float, na_value=np.nan), tv,
+                       limit=vlimit, nullable=True, what=f"{name} value", key="value",
+                       run=run_id, file=run.file(name), rows=rows)
+        conf = frame["confidence"].to_numpy(dtype=float, na_value=np.nan)
+        bad = np.flatnonzero(~((conf >= 0.0) & (conf <= 1.0)))
+        if bad.size:
+            i = int(bad[0])
+            raise RigIOError(f"confidence {float(conf[i])!r} outside [0, 1]", run=run_id,
+                             file=run.file(name), key="confidence", row=_row(i, rows),
+                             t_ns=int(tv[i]))
+
+
+def _speed_within(v: npt.NDArray[np.float64], t: npt.NDArray[np.int64], *, limit: float,
+                  unit: str, key: str, run: str, file: str, rows: bool) -> None:
+    if v.size < 2:
+        return
+    dt = np.diff(t).astype(float) / 1e9
+    with np.errstate(invalid="ignore", divide="ignore"):
+        speed = np.abs(np.diff(v)) / dt
+    fast = np.flatnonzero((dt > 0) & (speed > limit))
+    if fast.size:
+        i = int(fast[0]) + 1
+        raise RigIOError(f"{key} jumps by {v[i] - v[i - 1]:.6g} {unit} in {dt[i - 1] * 1e3:.3g}"
+                         f" ms ({speed[i - 1]:.3g} {unit}/s, beyond {limit:g}): a corrupt "
+                         "value, not motion", run=run, file=file, key=key, row=_row(i, rows),
+                         t_ns=int(t[i]))
+
+
+def _finite_within(v: npt.NDArray[np.float64], t: npt.NDArray[np.int64], *, limit: float,
+                   nullable: bool, what: str, key: str, run: str, file: str,
+                   rows: bool) -> None:
+    finite = np.isfinite(v)
+    bad = ~finite & ~np.isnan(v) if nullable else ~finite
+    with np.errstate(invalid="ignore"):
+        bad |= finite & (np.abs(v) > limit)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise RigIOError(f"{what} {float(v[i])!r} is not finite or beyond +-{limit:g}",
+                         run=run, file=file, key=key, row=_row(i, rows), t_ns=int(t[i]))
 
 
 def check_physical_run(run: PhysicalRun, *, rows: bool = False,
@@ -99,7 +206,8 @@ def check_physical_run(run: PhysicalRun, *, rows: bool = False,
         if frame is not None:
             check_timestamps(frame["t_ns"].to_numpy(dtype=np.int64), run=run_id,
                              file=run.file(name), check_gaps=name != "events", rows=rows,
-                             max_gap_periods=max_gap_periods)
+                             max_gap_periods=max_gap_periods,
+                             min_samples=1 if name == "events" else 2)
     if run.loadcell is not None:
         cells = run.manifest.get("channels", {}).get("loadcell") or {}
         t = run.loadcell["t_ns"].to_numpy(dtype=np.int64)
@@ -113,3 +221,9 @@ def check_physical_run(run: PhysicalRun, *, rows: bool = False,
         frame = getattr(run, name)
         if frame is not None:
             check_confident(frame, run=run_id, file=run.file(name))
+    check_physical_values(run, rows=rows)
+    t_enc = run.encoder["t_ns"].to_numpy(dtype=np.int64)
+    for name in ("loadcell", "camera", "tracker"):
+        frame = getattr(run, name)
+        if frame is not None:
+            check_overlap(frame, t_enc, stream=name, run=run_id, file=run.file(name))

@@ -9,11 +9,12 @@ the writer builds the folder under a temporary name and renames it into place.
 
 from __future__ import annotations
 
+import csv
 import gzip
 import io
 import json
 import os
-import zlib
+import re
 from pathlib import Path
 from typing import Any
 
@@ -22,9 +23,11 @@ import pandas as pd
 
 from rig_io import checks
 from rig_io.atomic import atomic_path
-from rig_io.errors import RigIOError
-from rig_io.manifest import check_manifest, parse_manifest
+from rig_io.errors import RigIOError, short
+from rig_io.limits import DEFAULT_LIMITS, ReadLimits, read_bytes
+from rig_io.manifest import check_manifest, is_safe_identifier, parse_manifest
 from rig_io.run import EVENT_KINDS, STREAM_COLUMNS, RawRun
+from rig_io.schema import validate_stream
 
 MANIFEST = "manifest.json"
 STREAMS = ("encoder", "loadcell", "camera", "tracker", "events")
@@ -50,8 +53,8 @@ def write_run_folder(run: RawRun, root: str | os.PathLike[str], *,
     Gzip headers carry no time stamp, so the same run always gives the same bytes.
     """
     run_id = run.run_id
-    if not run_id or "/" in run_id or run_id.startswith("."):
-        raise RigIOError("run_id is not a valid folder name", run=run_id)
+    if not is_safe_identifier(run_id):
+        raise RigIOError(f"run_id {short(run_id)} is not a safe folder name", key="run_id")
     target = Path(root) / run_id
     with atomic_path(target) as tmp:
         tmp.mkdir(parents=True)
@@ -75,45 +78,58 @@ def write_run_folder(run: RawRun, root: str | os.PathLike[str], *,
 # ----------------------------------------------------------------------------------- reading
 
 def find_stream(folder: Path, name: str) -> Path | None:
-    """The file of stream ``name`` in a run folder (``.csv`` or ``.csv.gz``), if any."""
+    """The file of stream ``name`` in a run folder (``.csv`` or ``.csv.gz``), if any.
+
+    Found by name only (``lexists``: a dangling symlink or a FIFO is found, then refused by
+    the reader rather than silently treated as absent); nothing is opened here.
+    """
     plain, gz = folder / f"{name}.csv", folder / f"{name}.csv.gz"
-    if plain.exists() and gz.exists():
-        raise RigIOError(f"both {plain.name} and {gz.name} exist", file=str(folder))
-    if plain.exists():
+    has_plain, has_gz = os.path.lexists(plain), os.path.lexists(gz)
+    if has_plain and has_gz:
+        raise RigIOError(f"both {plain.name} and {gz.name} exist", run=folder.name,
+                         file=str(folder), key=name)
+    if has_plain:
         return plain
-    if gz.exists():
+    if has_gz:
         return gz
     return None
 
 
-def read_manifest(folder: str | os.PathLike[str]) -> dict[str, Any]:
+def read_manifest(folder: str | os.PathLike[str], *,
+                  limits: ReadLimits = DEFAULT_LIMITS) -> dict[str, Any]:
     """Read and check ``manifest.json`` of a run folder (without reading the streams)."""
     folder = Path(folder)
     path = folder / MANIFEST
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise RigIOError("missing manifest.json", run=folder.name, file=str(path))
+    data = read_bytes(path, base=folder, run=folder.name, limit_mb=limits.max_manifest_mb,
+                      limit_name="max_manifest_mb")
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise RigIOError(f"unreadable manifest: {err}", run=folder.name,
-                         file=str(path)) from None
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = data[: err.start].count(b"\n") + 1
+        raise RigIOError("manifest is not valid UTF-8", run=folder.name, file=str(path),
+                         row=line) from None
     manifest = parse_manifest(text, run=folder.name, file=str(path))
     present = [n for n in STREAMS if find_stream(folder, n) is not None]
     check_manifest(manifest, file=str(path), streams=present, run_hint=folder.name)
     return manifest
 
 
-def read_run_folder(path: str | os.PathLike[str], *, check: bool = True) -> RawRun:
+def read_run_folder(path: str | os.PathLike[str], *, check: bool = True,
+                    limits: ReadLimits = DEFAULT_LIMITS) -> RawRun:
     """Read a run folder into a :class:`RawRun`, checking every bad-input case.
 
     With ``check`` (default) the value checks of :mod:`rig_io.checks` run too: timestamp
-    order and gaps, load-cell saturation, e-stop, camera confidence.
+    order and gaps, load-cell saturation, e-stop, camera confidence, stream overlap.
+    ``limits`` bounds what is read (sizes; special files are always refused).
     """
     folder = Path(path)
     if not folder.is_dir():
         raise RigIOError("run folder does not exist", run=folder.name, file=str(folder))
-    manifest = read_manifest(folder)
+    manifest = read_manifest(folder, limits=limits)
     run_id = str(manifest["run_id"])
+    bits = int(manifest["channels"]["encoder"]["counter_bits"])
     frames: dict[str, pd.DataFrame | None] = {}
     for name in STREAMS:
         file = find_stream(folder, name)
@@ -123,7 +139,8 @@ def read_run_folder(path: str | os.PathLike[str], *, check: bool = True) -> RawR
                                  file=str(folder / "encoder.csv"))
             frames[name] = None
             continue
-        frames[name] = read_stream_csv(file, name, run=run_id)
+        frames[name] = read_stream_csv(file, name, run=run_id, limits=limits,
+                                       counter_bits=bits, base=folder)
     run = RawRun(manifest=manifest, encoder=_not_none(frames["encoder"]),
                  loadcell=frames["loadcell"], camera=frames["camera"],
                  tracker=frames["tracker"], events=frames["events"])
@@ -138,7 +155,7 @@ def _not_none(frame: pd.DataFrame | None) -> pd.DataFrame:
 
 
 def check_raw_run(run: RawRun, *, folder: Path | None = None) -> None:
-    """Value checks of a raw run (timestamps, gaps, saturation, estop, confidence)."""
+    """Value checks of a raw run (timestamps, gaps, saturation, estop, confidence, overlap)."""
     run_id = run.run_id
 
     def fname(name: str) -> str:
@@ -149,7 +166,8 @@ def check_raw_run(run: RawRun, *, folder: Path | None = None) -> None:
 
     for name, frame in run.streams().items():
         t = frame["t_ns"].to_numpy(dtype=np.int64)
-        checks.check_timestamps(t, run=run_id, file=fname(name), check_gaps=name != "events")
+        checks.check_timestamps(t, run=run_id, file=fname(name), check_gaps=name != "events",
+                                min_samples=1 if name == "events" else 2)
     if run.loadcell is not None:
         cells = run.manifest["channels"]["loadcell"]
         t = run.loadcell["t_ns"].to_numpy(dtype=np.int64)
@@ -164,61 +182,136 @@ def check_raw_run(run: RawRun, *, folder: Path | None = None) -> None:
         frame = getattr(run, name)
         if frame is not None:
             checks.check_confident(frame, run=run_id, file=fname(name))
+    t_enc = run.encoder["t_ns"].to_numpy(dtype=np.int64)
+    for name in ("loadcell", "camera", "tracker"):
+        frame = getattr(run, name)
+        if frame is not None:
+            checks.check_overlap(frame, t_enc, stream=name, run=run_id, file=fname(name))
 
 
-def read_stream_csv(path: str | os.PathLike[str], name: str, *, run: str) -> pd.DataFrame:
-    """Read one stream CSV (plain or gzip) with the structural checks of format section 3."""
+#: Longest header line accepted (a header is a handful of column names).
+MAX_HEADER_CHARS = 4096
+_DECIMAL_COMMA = re.compile(r"-?\d+")
+
+
+def read_stream_csv(path: str | os.PathLike[str], name: str, *, run: str,
+                    limits: ReadLimits = DEFAULT_LIMITS, counter_bits: int | None = None,
+                    base: Path | None = None) -> pd.DataFrame:
+    """Read one stream CSV (plain or gzip) with the structural checks of format section 3
+    and the value ranges of :func:`rig_io.schema.raw_stream_schema`.
+
+    ``base`` is the run folder a symlinked stream must resolve inside (default: the file's
+    folder); ``counter_bits`` bounds the encoder counts.
+    """
     path = Path(path)
     file = str(path)
     cols = STREAM_COLUMNS[name]
+    gz = path.name.endswith(".gz")
+    data = read_bytes(path, base=base if base is not None else path.parent, run=run,
+                      limit_mb=limits.max_file_mb, limit_name="max_file_mb",
+                      gunzip_limit_mb=limits.max_decompressed_mb if gz else None)
     try:
-        data = path.read_bytes()
-        if path.suffix == ".gz":
-            data = gzip.decompress(data)
-    except (EOFError, OSError, zlib.error) as err:
-        raise RigIOError(f"unreadable or truncated file: {err}", run=run, file=file) from None
-    try:
-        text = data.decode("utf-8")
+        data.decode("utf-8")
     except UnicodeDecodeError as err:
         line = data[: err.start].count(b"\n") + 1
         raise RigIOError("not valid UTF-8", run=run, file=file, row=line) from None
-    if not text or text.isspace():
-        raise RigIOError("empty file", run=run, file=file)
-    header_end = text.find("\n")
-    header = (text if header_end < 0 else text[:header_end]).rstrip("\r").split(",")
-    header = [h.strip() for h in header]
+    if not data or data.isspace():
+        raise RigIOError("empty file", run=run, file=file, row=1)
+    nul = data.find(b"\0")
+    if nul >= 0:
+        raise RigIOError("NUL byte in a text file", run=run, file=file,
+                         row=data[:nul].count(b"\n") + 1)
+    header_end = data.find(b"\n")
+    head = data if header_end < 0 else data[:header_end]
+    if len(head) > MAX_HEADER_CHARS:
+        raise RigIOError(f"header line is {len(head)} characters long; not a CSV header",
+                         run=run, file=file, row=1)
+    header = [h.strip() for h in head.decode("utf-8").rstrip("\r").split(",")]
     missing = [c for c in cols if c not in header]
     if missing:
         raise RigIOError(f"missing required column(s) {', '.join(missing)} "
-                         f"(header is {','.join(header)})", run=run, file=file, row=1)
-    body = text[header_end + 1:] if header_end >= 0 else ""
+                         f"(header is {short(','.join(header))})", run=run, file=file, row=1,
+                         key=missing[0])
+    body = data[header_end + 1:] if header_end >= 0 else b""
     if not body or body.isspace():
-        raise RigIOError("no data rows after the header", run=run, file=file)
-    # A logger killed mid-write leaves a last line without its terminator or short of fields.
-    last_start = body.rstrip("\n").rfind("\n") + 1
-    last = body.rstrip("\n")[last_start:]
-    n_lines = text.rstrip("\n").count("\n") + 1
-    if not text.endswith("\n"):
-        raise RigIOError(f"truncated last line {last!r} (no line terminator)",
-                         run=run, file=file, row=n_lines)
-    if last.count(",") != len(header) - 1:
-        raise RigIOError(f"truncated last line {last!r} ({last.count(',') + 1} fields, "
-                         f"expected {len(header)})", run=run, file=file, row=n_lines)
+        raise RigIOError("no data rows after the header", run=run, file=file,
+                         row=checks.FIRST_DATA_LINE)
+    if not data.endswith(b"\n"):
+        last = body[body.rfind(b"\n") + 1:].decode("utf-8", "replace")
+        raise RigIOError(f"truncated last line {short(last)} (no line terminator)",
+                         run=run, file=file, row=data.count(b"\n") + 1)
+    _check_field_counts(body, header, quoted=name == "events" or b'"' in body, run=run,
+                        file=file, truncated_if_last=True)
     try:
-        frame = pd.read_csv(io.StringIO(text), sep=",", skip_blank_lines=False,
-                            keep_default_na=False, na_values=[""],
-                            usecols=list(cols), engine="c")
-    except pd.errors.ParserError as err:
+        frame = pd.read_csv(io.BytesIO(data), sep=",", skip_blank_lines=False,
+                            keep_default_na=False, na_values=[""], encoding="utf-8",
+                            usecols=list(cols), engine="c", index_col=False)
+    except (pd.errors.ParserError, ValueError) as err:
         raise RigIOError(f"malformed CSV: {err}".strip(), run=run, file=file,
                          row=_line_from_parser_error(str(err))) from None
-    return _typed(frame, name, run=run, file=file)
+    del data, body
+    typed = _typed(frame, name, run=run, file=file)
+    validate_stream(typed, name, run=run, file=file, counter_bits=counter_bits,
+                    first_row=checks.FIRST_DATA_LINE)
+    return typed
+
+
+def _check_field_counts(body: bytes, header: list[str], *, quoted: bool, run: str, file: str,
+                        truncated_if_last: bool) -> None:
+    """Every data line has the header's number of fields (a decimal comma, ``1,5``, adds
+    one; a logger killed mid-line leaves fewer). Quoted fields are honoured."""
+    expected = len(header)
+    if quoted:
+        lines = body.decode("utf-8").split("\n")[:-1]
+        reader = csv.reader(line.rstrip("\r") for line in lines)
+        counts = np.array([len(r) if r else 1 for r in reader], dtype=np.int64)
+        if counts.size != len(lines):  # a quote spanning lines
+            odd = next((k for k, line in enumerate(lines) if line.count('"') % 2), 0)
+            raise RigIOError(f"unbalanced quote in {short(lines[odd])}", run=run,
+                             file=file, row=odd + checks.FIRST_DATA_LINE)
+    else:
+        arr = np.frombuffer(body, dtype=np.uint8)
+        ends = np.flatnonzero(arr == 10)
+        commas = np.flatnonzero(arr == 44)
+        starts = np.concatenate([[0], ends[:-1] + 1])
+        counts = (np.searchsorted(commas, ends) - np.searchsorted(commas, starts)) + 1
+        lines = None
+    bad = np.flatnonzero(counts != expected)
+    if not bad.size:
+        return
+    i = int(bad[0])
+    row = i + checks.FIRST_DATA_LINE
+    if lines is not None:
+        line = lines[i].rstrip("\r")
+    else:
+        lo = 0 if i == 0 else int(ends[i - 1]) + 1
+        line = body[lo:int(ends[i])].decode("utf-8", "replace").rstrip("\r")
+    n = int(counts[i])
+    if n > expected:
+        fields = line.split(",")
+        # A decimal comma splits a real-valued column (integer columns have no decimals).
+        candidates = [j for j in range(min(len(fields) - 1, expected))
+                      if _DECIMAL_COMMA.fullmatch(fields[j].strip())
+                      and fields[j + 1].strip().isdigit()]
+        candidates.sort(key=lambda j: header[j] in _INTEGER)
+        for j in candidates[:1]:
+                raise RigIOError(
+                    f"{n} fields, expected {expected}: {short(fields[j] + ',' + fields[j + 1])}"
+                    f" in column {header[j]} looks like a decimal comma (the format uses '.')",
+                    run=run, file=file, row=row, key=header[j])
+    what = ("truncated last line" if truncated_if_last and i == counts.size - 1
+            and n < expected else "line")
+    raise RigIOError(f"{what} {short(line)} has {n} fields, expected {expected}",
+                     run=run, file=file, row=row)
 
 
 def _line_from_parser_error(msg: str) -> int | None:
-    import re
-
     m = re.search(r"line (\d+)", msg)
     return int(m.group(1)) if m else None
+
+
+#: Largest magnitude an int64 column holds (t_ns, counts, frame numbers).
+_INT64_LIMIT = float(2**63)
 
 
 def _typed(frame: pd.DataFrame, name: str, *, run: str, file: str) -> pd.DataFrame:
@@ -233,40 +326,51 @@ def _typed(frame: pd.DataFrame, name: str, *, run: str, file: str) -> pd.DataFra
                 bad = np.flatnonzero(~values.isin(EVENT_KINDS).to_numpy())
                 if bad.size:
                     i = int(bad[0])
-                    raise RigIOError(f"unknown event {values.iloc[i]!r} "
+                    raise RigIOError(f"unknown event {short(values.iloc[i])} "
                                      f"(expected one of {', '.join(EVENT_KINDS)})",
-                                     run=run, file=file, row=i + checks.FIRST_DATA_LINE)
+                                     run=run, file=file, row=i + checks.FIRST_DATA_LINE,
+                                     key=col)
             out[col] = values.to_numpy(dtype=object)
             continue
         empty = raw.isna().to_numpy()
-        if pd.api.types.is_numeric_dtype(raw.dtype):
+        exact_int = raw.dtype == np.int64
+        if raw.dtype == np.uint64:  # only values beyond int64 make pandas choose uint64
+            num = raw.to_numpy(dtype=float)
+        elif pd.api.types.is_numeric_dtype(raw.dtype) and raw.dtype != bool:
             num = raw.to_numpy(dtype=float, na_value=np.nan)
         else:  # the C parser found something that is not a number somewhere
             num = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
             bad = np.flatnonzero(~empty & ~np.isfinite(num))
             if bad.size:
                 i = int(bad[0])
-                raise RigIOError(f"non-numeric value {raw.iloc[i]!r} in column {col}",
-                                 run=run, file=file, row=i + checks.FIRST_DATA_LINE)
+                raise RigIOError(f"non-numeric value {short(raw.iloc[i])} in column {col}",
+                                 run=run, file=file, row=i + checks.FIRST_DATA_LINE, key=col)
         bad = np.flatnonzero(~empty & ~np.isfinite(num))
         if bad.size:
             i = int(bad[0])
-            raise RigIOError(f"non-finite value {raw.iloc[i]!r} in column {col}",
-                             run=run, file=file, row=i + checks.FIRST_DATA_LINE)
+            raise RigIOError(f"non-finite value {short(raw.iloc[i])} in column {col}",
+                             run=run, file=file, row=i + checks.FIRST_DATA_LINE, key=col)
         if col in required or (col == "output_counts" and 0 < empty.sum() < len(empty)):
             holes = np.flatnonzero(empty)
             if holes.size:
                 i = int(holes[0])
                 raise RigIOError(f"empty value in column {col}", run=run, file=file,
-                                 row=i + checks.FIRST_DATA_LINE)
+                                 row=i + checks.FIRST_DATA_LINE, key=col)
         if col in _INTEGER:
             ok = ~empty
+            if not exact_int:
+                huge = ok & (np.abs(np.where(ok, num, 0.0)) >= _INT64_LIMIT)
+                if huge.any():
+                    i = int(np.flatnonzero(huge)[0])
+                    raise RigIOError(f"value {short(raw.iloc[i])} in column {col} is beyond "
+                                     "the 64-bit integer range", run=run, file=file,
+                                     row=i + checks.FIRST_DATA_LINE, key=col)
             frac = ok & (num != np.round(num))
             if frac.any():
                 i = int(np.flatnonzero(frac)[0])
-                raise RigIOError(f"non-integer value {raw.iloc[i]!r} in column {col}",
-                                 run=run, file=file, row=i + checks.FIRST_DATA_LINE)
-            if raw.dtype == np.int64:
+                raise RigIOError(f"non-integer value {short(raw.iloc[i])} in column {col}",
+                                 run=run, file=file, row=i + checks.FIRST_DATA_LINE, key=col)
+            if exact_int:
                 out[col] = raw.to_numpy()  # exact, even beyond 2**53
             elif empty.any():
                 out[col] = pd.array(np.where(ok, num, 0).astype(np.int64), dtype="Int64")

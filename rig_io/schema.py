@@ -6,12 +6,15 @@ Documented in ``docs/dataset-schema.md``; bump :data:`SCHEMA_VERSION` when it ch
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 import pandas as pd
 import pandera.pandas as pa
 import pyarrow as pa_arrow
 
-from rig_io.errors import RigIOError
+from rig_io.errors import RigIOError, short
+from rig_io.run import EVENT_KINDS
 
 SCHEMA_VERSION = "1"
 
@@ -91,3 +94,84 @@ def validate(df: pd.DataFrame, *, where: str, run: str | None = None) -> pd.Data
         text = "; ".join(line.strip() for line in summary[:12] if line.strip())
         raise RigIOError(f"dataset schema check failed at the {where} edge: {text}",
                          run=run) from None
+
+
+# ------------------------------------------------------------------------ raw stream schemas
+
+#: Physical bounds of raw stream values (rig-log-format.md section 1). A bridge load cell
+#: gives a few mV/V; 1000 mV/V is far beyond any bridge and marks a corrupt cell.
+MAX_ABS_MV_PER_V = 1e3
+#: Camera and tracker values (mm or deg): far beyond any rig's stroke or tip angle.
+MAX_ABS_VISION_VALUE = 1e5
+
+
+def counter_range(bits: int) -> tuple[int, int]:
+    """Values a ``bits``-bit up/down counter can report: signed ``[-2^(b-1), 2^(b-1))`` or,
+    from a logger that writes the register unsigned, ``[0, 2^b)``."""
+    return -(1 << (bits - 1)), (1 << bits) - 1
+
+
+@cache
+def raw_stream_schema(name: str, *, counter_bits: int | None = None) -> pa.DataFrameSchema:
+    """The declared schema of one typed raw stream (after the reader's parsing).
+
+    Encoder counts must fit the manifest's ``counter_bits`` counter (a count of 1e30 or 2^63
+    is corruption, not a wrap-around); load-cell readings, camera values and confidences
+    must lie in their physical ranges.
+    """
+    t = pa.Column("int64", nullable=False, title="t_ns")
+    if name == "encoder":
+        lo, hi = counter_range(counter_bits if counter_bits is not None else 63)
+        rng = pa.Check.in_range(lo, hi, error=f"outside the {counter_bits}-bit counter's "
+                                f"range [{lo}, {hi}]")
+        cols = {"t_ns": t, "input_counts": pa.Column("int64", rng, nullable=False),
+                "output_counts": pa.Column("Int64", rng, nullable=True)}
+    elif name == "loadcell":
+        mv = pa.Check.in_range(-MAX_ABS_MV_PER_V, MAX_ABS_MV_PER_V,
+                               error=f"beyond +-{MAX_ABS_MV_PER_V:g} mV/V (no bridge gives it)")
+        cols = {"t_ns": t, "input_mv_per_v": pa.Column(float, mv, nullable=False),
+                "output_mv_per_v": pa.Column(float, mv, nullable=False)}
+    elif name in ("camera", "tracker"):
+        cols = {"t_ns": t,
+                "frame": pa.Column("int64", pa.Check.ge(0, error="a negative frame number"),
+                                   nullable=False),
+                "value": pa.Column(float, pa.Check.in_range(
+                    -MAX_ABS_VISION_VALUE, MAX_ABS_VISION_VALUE,
+                    error=f"beyond +-{MAX_ABS_VISION_VALUE:g}"), nullable=True),
+                "confidence": pa.Column(float, pa.Check.in_range(
+                    0.0, 1.0, error="confidence outside [0, 1]"), nullable=False)}
+    elif name == "events":
+        cols = {"t_ns": t,
+                "event": pa.Column(None, pa.Check.isin(list(EVENT_KINDS),
+                                                       error="unknown event"), nullable=False),
+                "detail": pa.Column(None, nullable=True)}
+    else:
+        raise RigIOError(f"unknown stream {name!r}")
+    return pa.DataFrameSchema(cols, strict=False)
+
+
+def validate_stream(frame: pd.DataFrame, name: str, *, run: str, file: str,
+                    counter_bits: int | None = None, first_row: int | None = 2) -> None:
+    """Check a typed raw stream against :func:`raw_stream_schema`; the first bad cell is a
+    :class:`RigIOError` naming the column, the row (file line, header = 1) and the value."""
+    schema = raw_stream_schema(name, counter_bits=counter_bits)
+    try:
+        schema.validate(frame, lazy=False)
+    except pa.errors.SchemaError as err:
+        col = getattr(err, "column_name", None)
+        cases = err.failure_cases
+        row: int | None = None
+        value: object = None
+        if isinstance(cases, pd.DataFrame) and len(cases):
+            index = cases["index"].iloc[0] if "index" in cases else None
+            value = cases["failure_case"].iloc[0] if "failure_case" in cases else None
+            value = value.item() if isinstance(value, np.generic) else value
+            if index is not None and first_row is not None and not pd.isna(index):
+                row = int(index) + first_row
+        check = err.check
+        what = (check.error if isinstance(check, pa.Check) and check.error
+                else str(check) if check is not None else "invalid")
+        if what == "not_nullable":
+            what = "empty or missing value where one is required"
+        raise RigIOError(f"{col} = {short(value)}: {what}", run=run, file=file, key=str(col),
+                         row=row) from None

@@ -10,15 +10,19 @@ from __future__ import annotations
 
 import hashlib
 import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from rig_io import checks
 from rig_io.bag import is_bag, read_bag, sidecar_manifest
 from rig_io.calibrate import PhysicalRun, calibrate_raw_run
-from rig_io.errors import RigIOError
+from rig_io.errors import RigIOError, short
 from rig_io.folder import MANIFEST, STREAMS, find_stream, read_run_folder
 from rig_io.importer import import_file, matches
+from rig_io.limits import DEFAULT_LIMITS, ReadLimits, check_regular
+from rig_io.manifest import is_safe_identifier
 
 SourceKind = Literal["folder", "rosbag1", "rosbag2", "import"]
 
@@ -41,8 +45,18 @@ class Source:
 
 
 def _looks_like_run_folder(p: Path) -> bool:
-    return (p / MANIFEST).exists() or any(
-        (p / f"{s}.csv").exists() or (p / f"{s}.csv.gz").exists() for s in STREAMS)
+    return os.path.lexists(p / MANIFEST) or any(
+        os.path.lexists(p / f"{s}.csv") or os.path.lexists(p / f"{s}.csv.gz")
+        for s in STREAMS)
+
+
+def _is_regular(p: Path) -> bool:
+    """A regular file (following symlinks), decided without opening it: a FIFO is never
+    opened, so it can never hang discovery or hashing."""
+    try:
+        return stat.S_ISREG(os.stat(p).st_mode)
+    except OSError:
+        return False
 
 
 def discover(root: str | os.PathLike[str], *,
@@ -52,20 +66,26 @@ def discover(root: str | os.PathLike[str], *,
     if not root.is_dir():
         raise RigIOError("source folder does not exist", file=str(root))
     found: list[Source] = []
+    seen: set[Path] = set()
 
     def walk(folder: Path) -> None:
+        real = folder.resolve()
+        if real in seen:  # a symlink loop, or the same folder linked twice
+            return
+        seen.add(real)
         for p in sorted(folder.iterdir()):
             if p.name.startswith("."):
                 continue
             if p.is_dir():
                 if (p / "metadata.yaml").exists():
-                    files = sorted(f for f in p.iterdir() if f.is_file())
+                    files = sorted(f for f in p.iterdir() if _is_regular(f))
                     side = sidecar_manifest(p)
                     found.append(Source("rosbag2", p, tuple(files + ([side] if side.exists()
                                                                       else []))))
                 elif _looks_like_run_folder(p):
                     found.append(Source("folder", p, tuple(sorted(
-                        f for f in p.iterdir() if f.is_file() and not f.name.startswith(".")))))
+                        f for f in p.iterdir()
+                        if _is_regular(f) and not f.name.startswith(".")))))
                 else:
                     walk(p)
             elif p.suffix == ".bag":
@@ -84,7 +104,11 @@ def hash_files(files: tuple[Path, ...], *, root: Path) -> tuple[str, dict[str, s
     each: dict[str, str] = {}
     for f in files:
         h = hashlib.sha256()
-        with f.open("rb") as fh:
+        if not _is_regular(f):
+            raise OSError(f"{f} is not a regular file; refused")
+        with open(os.open(f, os.O_RDONLY | os.O_NONBLOCK), "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+                raise OSError(f"{f} is not a regular file; refused")
             for block in iter(lambda: fh.read(1 << 20), b""):
                 h.update(block)
         digest = h.hexdigest()
@@ -97,22 +121,58 @@ def hash_files(files: tuple[Path, ...], *, root: Path) -> tuple[str, dict[str, s
     return total.hexdigest(), each
 
 
-def load(source: Source, *, mapping: dict[str, Any] | None = None) -> PhysicalRun:
-    """Read and check one source; :class:`RigIOError` on any bad input."""
+def load(source: Source, *, mapping: dict[str, Any] | None = None,
+         limits: ReadLimits = DEFAULT_LIMITS) -> PhysicalRun:
+    """Read and check one source; :class:`RigIOError` on any bad input.
+
+    Values are checked after calibration whatever the container (finite, within physical
+    ranges), and the run id and rig must be safe file names (importers build them from
+    file names). Any other exception from a reader is wrapped with the source it came from.
+    """
+    try:
+        phys = _load(source, mapping=mapping, limits=limits)
+    except RigIOError:
+        raise
+    except (MemoryError, RecursionError, ValueError, TypeError, KeyError, IndexError,
+            OverflowError, AttributeError, OSError) as err:
+        raise RigIOError(f"could not be read ({type(err).__name__}: {err})",
+                         run=_hint(source), file=str(source.path)) from None
+    for key in ("run_id", "rig"):
+        value = phys.manifest.get(key)
+        if not is_safe_identifier(value):
+            raise RigIOError(f"{key} {short(value)} is not a safe file name (1-128 of "
+                             "A-Z a-z 0-9 . _ -, a letter or digit first, no '..')",
+                             run=_hint(source), file=str(source.path), key=key)
+    return phys
+
+
+def _hint(source: Source) -> str:
+    return source.path.name.removesuffix(".bag")
+
+
+def _load(source: Source, *, mapping: dict[str, Any] | None,
+          limits: ReadLimits) -> PhysicalRun:
     if source.kind == "folder":
-        raw = read_run_folder(source.path)
+        raw = read_run_folder(source.path, limits=limits)
         files = {}
         for s in STREAMS:
             found = find_stream(source.path, s)
             if found is not None:
                 files[s] = str(found)
-        return calibrate_raw_run(raw, files=files)
+        phys = calibrate_raw_run(raw, files=files)
+        checks.check_physical_values(phys, rows=True)
+        return phys
     if source.kind in ("rosbag1", "rosbag2"):
         if not is_bag(source.path):
-            raise RigIOError("not a bag", file=str(source.path))
-        return read_bag(source.path)
+            raise RigIOError("not a bag", run=_hint(source), file=str(source.path))
+        return read_bag(source.path, limits=limits)
     if source.kind == "import":
         if mapping is None:
             raise RigIOError("foreign log without an importer mapping", file=str(source.path))
+        st = check_regular(source.path, base=None, run=_hint(source))
+        if st.st_size > limits.max_file_mb * 1024 * 1024:
+            raise RigIOError(f"file is {st.st_size / 2**20:.1f} MB, beyond the limit of "
+                             f"{limits.max_file_mb:g} MB (limits.max_file_mb)",
+                             run=_hint(source), file=str(source.path))
         return import_file(mapping, source.path)
     raise RigIOError(f"unknown source kind {source.kind!r}", file=str(source.path))

@@ -305,6 +305,14 @@ def synchronise(run: PhysicalRun, options: SyncOptions | None = None) -> SyncedR
         tc, vc, cc = confident_frames(run.camera)
         if tc.size == 0:
             raise RigIOError("no confident camera frame", run=run.run_id, file=run.file("camera"))
+        # Frames on another clock would be held constant over the whole run by the smoother.
+        t_end = float(t_ns[-1])
+        slack = opt.max_latency_ms * 1e6
+        if not np.any((tc >= t0) & (tc <= t_end + slack)):
+            raise RigIOError(f"no confident camera frame within the encoder's span "
+                             f"(frames t={tc[0] / 1e9:.3f}..{tc[-1] / 1e9:.3f} s, encoder "
+                             f"t={t0 / 1e9:.3f}..{t_end / 1e9:.3f} s)", run=run.run_id,
+                             file=run.file("camera"))
         cam = run.manifest.get("channels", {}).get("camera") or {}
         nominal_ms = cam.get("nominal_latency_ms")
         tcs = (tc - t0) / 1e9
