@@ -33,7 +33,7 @@ from pipelines.common import (
     to_container,
 )
 from pipelines.stages import FamilySpec, FitTask, PipelineError
-from rig_io.atomic import write_text_atomic
+from rig_io.atomic import contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 MODEL_FILE_FORMAT = "tsm-fitted-model/1"
@@ -122,7 +122,8 @@ def family_specs(cfg: Mapping[str, Any], *, conf_dir: Path = CONF_DIR) -> list[F
 def model_path(models_dir: Path, row: Mapping[str, Any]) -> Path:
     config = stages.Configuration(str(row["rig"]), stages._num(row["curve_angle_deg"]),
                                   stages._num(row["radius_mm"]))
-    return models_dir / str(row["family"]) / f"{config.label}__{row['fit_excitation']}.json"
+    return contained(models_dir, str(row["family"]),
+                     f"{config.label}__{row['fit_excitation']}.json")
 
 
 def save_models(fits: pd.DataFrame, models_dir: Path) -> list[Path]:

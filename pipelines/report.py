@@ -34,7 +34,7 @@ from pipelines.common import (
 )
 from pipelines.fit import load_models
 from pipelines.stages import Configuration, PipelineError
-from rig_io.atomic import atomic_path, write_text_atomic
+from rig_io.atomic import atomic_path, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 KEY_FILE = "report_key.json"
@@ -254,7 +254,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
     jobs = []
     if plot_cfg.get("per_configuration", True):
         for c in configs:
-            out = plots_dir / f"config_{c.label}.png"
+            out = contained(plots_dir, f"config_{c.label}.png")
             title = (f"{c.rig}  phi={c.curve_angle_deg:g} deg  r={c.radius_mm:g} mm"
                      if c.curve_angle_deg is not None and c.radius_mm is not None else c.label)
             jobs.append((c.label, prediction_path(paths.predictions, c), out, title))
@@ -340,7 +340,7 @@ def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fi
     ops = np.asarray(design(u)) if callable(design) else stages.play_operator_outputs(u, p)
     return plots.elementary_figure(
         sub["t_s"].to_numpy(), u, sub["output"].to_numpy(), ops[:, :q.size], q, p,
-        plots_dir / f"elementary_{config.label}.png",
+        contained(plots_dir, f"elementary_{config.label}.png"),
         title=f"Weighted elementary operators q_i gamma_i of Gamma, {config.label} "
               f"({fit_exc}; seed 001 Fig. 4.12)", dpi=dpi, max_points=max_points)
 

@@ -35,14 +35,14 @@ from pipelines.common import (
 )
 from pipelines.fit import load_models
 from pipelines.stages import Configuration, RunSignal
-from rig_io.atomic import atomic_path, write_text_atomic
+from rig_io.atomic import atomic_path, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 META_KEY = b"tsm_validate"
 
 
 def prediction_path(predictions_dir: Path, config: Configuration) -> Path:
-    return predictions_dir / f"{config.label}.parquet"
+    return contained(predictions_dir, f"{config.label}.parquet")
 
 
 def read_prediction_meta(path: Path) -> dict[str, Any] | None:
