@@ -33,7 +33,7 @@ from pipelines.common import (
     to_container,
 )
 from pipelines.stages import FamilySpec, FitTask, PipelineError
-from rig_io.atomic import contained, write_text_atomic
+from rig_io.atomic import clean_leftovers, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 MODEL_FILE_FORMAT = "tsm-fitted-model/1"
@@ -218,6 +218,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
     Reads the processed dataset (unless given), fits what is not cached, writes model files.
     """
     paths = Paths.from_config(cfg["paths"])
+    clean_leftovers(paths.models)  # temporaries of a killed fit
     if dataset is None:
         dataset = read_processed(paths.processed)
     sig = cfg.get("signals") or {}

@@ -34,7 +34,7 @@ from pipelines.common import (
 )
 from pipelines.fit import load_models
 from pipelines.stages import Configuration, PipelineError
-from rig_io.atomic import atomic_path, contained, write_text_atomic
+from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 KEY_FILE = "report_key.json"
@@ -195,6 +195,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
 
     start = time.perf_counter()
     paths = Paths.from_config(cfg["paths"])
+    clean_leftovers(paths.reports)  # temporaries of a killed report
     reports = paths.reports
     if metrics is None:
         if not paths.metrics_parquet.exists():
