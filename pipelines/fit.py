@@ -136,6 +136,7 @@ def save_models(fits: pd.DataFrame, models_dir: Path) -> list[Path]:
             "model": json.loads(row["model_json"]) if isinstance(row.get("model_json"), str)
             else None,
         }
+        record["model_sha256"] = cache.hash_json(record["model"])
         path = model_path(models_dir, row)
         write_text_atomic(path, json.dumps(record, indent=1, allow_nan=True))
         written.append(path)
@@ -154,6 +155,9 @@ def load_models(models_dir: Path) -> pd.DataFrame:
         if record.get("format") != MODEL_FILE_FORMAT:
             continue
         model = record.pop("model", None)
+        if record.get("model_sha256") != cache.hash_json(model):  # edited or damaged: refit
+            log.warning("ignoring model file %s: content does not match its hash", path)
+            continue
         row = {c: record.get(c) for c in stages.FIT_COLUMNS}
         row["model_json"] = json.dumps(model) if model is not None else None
         row["cached"] = True

@@ -621,11 +621,22 @@ class MlflowSweepCallback(_HydraCallback):
         (sweep_dir / PARENT_FILE).write_text(self._parent, encoding="utf-8")
         self._prev_env = os.environ.get(PARENT_ENV)
         os.environ[PARENT_ENV] = self._parent
+        import atexit
+
+        atexit.register(self._end_if_open)
+
+    def _end_if_open(self) -> None:
+        """At exit without ``on_multirun_end`` (a job raised): the sweep failed."""
+        if self._tracker is not None and self._parent is not None:
+            with contextlib.suppress(Exception):
+                self._tracker.end_run(self._parent, status="FAILED")
+            self._parent = None
 
     def on_multirun_end(self, config: Any, **kwargs: Any) -> None:
         if self._tracker is None or self._parent is None:
             return
         self._tracker.end_run(self._parent)
+        self._parent = None
         if self._prev_env is None:
             os.environ.pop(PARENT_ENV, None)
         else:

@@ -68,3 +68,22 @@ def test_code_files_follow_relative_lazy_and_chained_imports(
     finally:
         for name in [m for m in sys.modules if m.startswith("fampkg")]:
             del sys.modules[name]
+
+
+
+def test_a_model_file_whose_content_no_longer_matches_its_hash_is_refitted(
+        tmp_path: Path) -> None:
+    import json
+
+    data = make_dataset(angles=(15,), radii=(30,), dt=0.1)
+    cfg = stage_cfg(tmp_path, families=["linear"])
+    first = fit_stage.run(cfg, dataset=data)
+    path = next((tmp_path / "data/interim/models/linear").glob("*.json"))
+    record = json.loads(path.read_text())
+    record["model"]["fitted"]["gain_"] += 1.0  # a damaged or hand-edited file
+    path.write_text(json.dumps(record))
+    again = fit_stage.run(cfg, dataset=data)
+    assert not again["cached"].any()  # not trusted: fitted again, and rewritten
+    assert again["model_json"].iloc[0] == first["model_json"].iloc[0]
+    assert json.loads(path.read_text())["model"] == json.loads(first["model_json"].iloc[0])
+    assert fit_stage.run(cfg, dataset=data)["cached"].all()

@@ -57,3 +57,30 @@ def test_staging_folders_of_dead_processes_are_removed(tmp_path: Path) -> None:
     unrelated.write_text("template")
     assert tracking.clean_staging_leftovers(tmp_path) == [dead]
     assert live.is_dir() and unrelated.is_file() and not dead.exists()
+
+
+@pytest.mark.slow
+def test_a_sweep_with_a_failing_job_leaves_no_run_running(tmp_path: Path) -> None:
+    import os
+
+    from mlflow import MlflowClient
+
+    from tests.pipelines.pipeline_data import make_dataset, write_dataset
+
+    write_dataset(make_dataset(angles=(15,), radii=(30,), dt=0.25, periods=1,
+                               kinds=("sine_decay",)), tmp_path)
+    mlflow_store(tmp_path)
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    env.pop("TSM_MLFLOW_PARENT_RUN_ID", None)
+    proc = subprocess.run(
+        [sys.executable, "-m", "pipelines.fit", "-m", "families=[linear]",
+         "config.curve_angle_deg=15,33", f"paths.root={tmp_path}", "progress=false",
+         f"hydra.sweep.dir={tmp_path}/multirun"],  # no 33 deg data: that job fails
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0 and "no configuration matches" in proc.stderr
+    client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
+    exp = client.get_experiment_by_name("tsm-hysteresis")
+    runs = client.search_runs([exp.experiment_id])
+    parent = [r for r in runs if r.data.tags.get("sweep") == "true"]
+    assert len(parent) == 1 and parent[0].info.status == "FAILED"
+    assert "RUNNING" not in {r.info.status for r in runs}
