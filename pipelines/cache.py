@@ -2,12 +2,15 @@
 
 A result is recomputed only when one of the things it was computed from changed: the data
 (hashed by value, not by file time), the resolved configuration, or the source code of the
-model family that produced it. Hashes are hex SHA-256 digests, shortened for readability.
+model family that produced it (its module and every module of its package it imports).
+Hashes are hex SHA-256 digests, shortened for readability.
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
+import importlib.util
 import inspect
 import json
 from collections.abc import Iterable, Mapping
@@ -85,16 +88,77 @@ def hash_path(path: Path) -> str:
     return _digest(h)
 
 
+def _read_source(path: Path) -> bytes:
+    """The bytes of one source file (one seam, so tests can stand in an edited file)."""
+    return path.read_bytes()
+
+
+def _imported_names(tree: ast.AST, module: str, *, is_package: bool) -> set[str]:
+    """Absolute names of every module an ``import`` statement of ``tree`` may load
+    (``from a import b`` gives ``a`` and ``a.b``: ``b`` may be a submodule)."""
+    parts = module.split(".")
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                pkg = parts if is_package else parts[:-1]
+                pkg = pkg[:len(pkg) - (node.level - 1)]
+                base = ".".join([*pkg, *([node.module] if node.module else [])])
+            else:
+                base = node.module or ""
+            names.add(base)
+            names.update(f"{base}.{a.name}" for a in node.names)
+    return {n for n in names if n}
+
+
+def code_files(module: str) -> dict[str, Path]:
+    """``module``'s file and the file of every module of the same top-level package that it
+    imports, directly or through others (any ``import`` statement, also inside functions),
+    plus the packages' ``__init__`` files that importing them runs."""
+    top = module.split(".")[0]
+    found: dict[str, Path] = {}
+    todo = [module]
+    while todo:
+        name = todo.pop()
+        if name in found or not (name == top or name.startswith(f"{top}.")):
+            continue
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError, AttributeError):
+            spec = None  # ``from pkg import function``: not a module
+        if spec is None or spec.origin is None or not spec.origin.endswith(".py"):
+            continue
+        path = Path(spec.origin)
+        found[name] = path
+        pieces = name.split(".")
+        todo.extend(".".join(pieces[:i]) for i in range(1, len(pieces)))
+        tree = ast.parse(_read_source(path), filename=str(path))
+        todo.extend(_imported_names(tree, name,
+                                    is_package=spec.submodule_search_locations is not None))
+    return found
+
+
 @lru_cache(maxsize=64)
 def source_hash(cls: type) -> str:
-    """Hash of the source file that defines ``cls`` (a model family's code version)."""
-    try:
-        src = inspect.getsourcefile(cls)
-    except TypeError:
-        src = None
-    if src is None:
-        return "no-source"
-    return hash_files([Path(src)])
+    """Hash of the code a model family runs: the module defining ``cls`` and every module
+    of its package it imports transitively (:func:`code_files`), so that editing e.g. the
+    play operator kernel refits the Gamma models."""
+    files = code_files(cls.__module__)
+    if not files:
+        try:
+            src = inspect.getsourcefile(cls)
+        except TypeError:
+            src = None
+        if src is None:
+            return "no-source"
+        files = {cls.__module__: Path(src)}
+    h = hashlib.sha256()
+    for name in sorted(files):
+        h.update(name.encode() + b"\0")
+        h.update(hashlib.sha256(_read_source(files[name])).digest())
+    return _digest(h)
 
 
 def combine(parts: Mapping[str, Any]) -> str:

@@ -15,6 +15,31 @@ from pipelines.stages import PipelineError
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 CONF_DIR = REPO_ROOT / "conf"
+#: Environment variable holding the id of the current Hydra sweep (its folder's suffix).
+SWEEP_ID_ENV = "TSM_SWEEP_ID"
+
+
+def sweep_id() -> str:
+    """One id per sweep, the same in every job process of it: made once by the launching
+    process (pid + random) and passed down the environment, so two sweeps started in the
+    same second never share a ``multirun/`` folder (``${tsm_sweep_id:}`` in conf/hydra)."""
+    value = os.environ.get(SWEEP_ID_ENV)
+    if not value:
+        import secrets
+
+        value = f"{os.getpid()}-{secrets.token_hex(3)}"
+        os.environ[SWEEP_ID_ENV] = value
+    return value
+
+
+def _register_resolvers() -> None:
+    from omegaconf import OmegaConf
+
+    if not OmegaConf.has_resolver("tsm_sweep_id"):
+        OmegaConf.register_new_resolver("tsm_sweep_id", sweep_id, use_cache=True)
+
+
+_register_resolvers()
 
 
 @dataclass(frozen=True)

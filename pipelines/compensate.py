@@ -58,7 +58,7 @@ from hysteresis.compensation import (
     sine_profile,
     triangle_profile,
 )
-from rig_io.atomic import atomic_path, write_text_atomic
+from rig_io.atomic import atomic_path, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 DT_S = 0.01  # the rig's 10 ms control tick
@@ -177,7 +177,7 @@ class Artifacts:
     files: list[Path] = field(default_factory=list)
 
     def table(self, name: str, frame: pd.DataFrame) -> Path:
-        path = self.out_dir / f"{name}.parquet"
+        path = contained(self.out_dir, f"{name}.parquet")
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
             frame.to_parquet(tmp, index=False)
@@ -187,7 +187,7 @@ class Artifacts:
     def figure(self, name: str, fig: Any) -> Path | None:
         import matplotlib.pyplot as plt
 
-        path = self.out_dir / "plots" / f"{name}.png"
+        path = contained(self.out_dir, "plots", f"{name}.png")
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
             fig.savefig(tmp, dpi=90, format="png")

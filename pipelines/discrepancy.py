@@ -34,7 +34,7 @@ from hysteresis.discrepancy.workflow import (
     run_workflow,
     strip_private,
 )
-from rig_io.atomic import atomic_path, write_text_atomic
+from rig_io.atomic import atomic_path, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 HELDOUT_ROLES = ("held_out", "heldout", "validation", "test")
@@ -226,7 +226,7 @@ def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
         # Keep a 0.4 inch strip for the suptitle whatever the number of rows.
         fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - 0.4 / fig.get_figheight()))
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in g.key)
-        path = out_dir / f"discrepancy_{safe}.png"
+        path = contained(out_dir, f"discrepancy_{safe}.png")
         with atomic_path(path, suffix=".png") as tmp:
             fig.savefig(tmp, dpi=90, format="png")
         plt.close(fig)

@@ -33,7 +33,7 @@ from pipelines.common import (
     to_container,
 )
 from pipelines.stages import FamilySpec, FitTask, PipelineError
-from rig_io.atomic import write_text_atomic
+from rig_io.atomic import clean_leftovers, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 MODEL_FILE_FORMAT = "tsm-fitted-model/1"
@@ -122,7 +122,8 @@ def family_specs(cfg: Mapping[str, Any], *, conf_dir: Path = CONF_DIR) -> list[F
 def model_path(models_dir: Path, row: Mapping[str, Any]) -> Path:
     config = stages.Configuration(str(row["rig"]), stages._num(row["curve_angle_deg"]),
                                   stages._num(row["radius_mm"]))
-    return models_dir / str(row["family"]) / f"{config.label}__{row['fit_excitation']}.json"
+    return contained(models_dir, str(row["family"]),
+                     f"{config.label}__{row['fit_excitation']}.json")
 
 
 def save_models(fits: pd.DataFrame, models_dir: Path) -> list[Path]:
@@ -135,6 +136,7 @@ def save_models(fits: pd.DataFrame, models_dir: Path) -> list[Path]:
             "model": json.loads(row["model_json"]) if isinstance(row.get("model_json"), str)
             else None,
         }
+        record["model_sha256"] = cache.hash_json(record["model"])
         path = model_path(models_dir, row)
         write_text_atomic(path, json.dumps(record, indent=1, allow_nan=True))
         written.append(path)
@@ -153,6 +155,9 @@ def load_models(models_dir: Path) -> pd.DataFrame:
         if record.get("format") != MODEL_FILE_FORMAT:
             continue
         model = record.pop("model", None)
+        if record.get("model_sha256") != cache.hash_json(model):  # edited or damaged: refit
+            log.warning("ignoring model file %s: content does not match its hash", path)
+            continue
         row = {c: record.get(c) for c in stages.FIT_COLUMNS}
         row["model_json"] = json.dumps(model) if model is not None else None
         row["cached"] = True
@@ -217,6 +222,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
     Reads the processed dataset (unless given), fits what is not cached, writes model files.
     """
     paths = Paths.from_config(cfg["paths"])
+    clean_leftovers(paths.models)  # temporaries of a killed fit
     if dataset is None:
         dataset = read_processed(paths.processed)
     sig = cfg.get("signals") or {}

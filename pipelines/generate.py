@@ -8,7 +8,10 @@ Each run is simulated by :func:`rig_io.virtual.simulate_run` and written by the 
 writers (:func:`rig_io.folder.write_run_folder`, :func:`rig_io.bag.write_bag`), atomically.
 Raw runs are never rewritten: a run that already exists with the same spec is skipped, a
 different spec under an existing run id is an error unless ``overwrite=true``. The specs and
-their hashes are recorded in ``<out>/campaign.json``.
+their hashes are recorded in ``<out>/campaign.json``: every spec as ``pending`` before any run
+is written, then ``done`` as each run lands, so a campaign killed at any point is completed by
+the same command (a run folder exists only whole, from the spec the book names). Temporaries
+of a killed writer are removed when the stage starts.
 """
 
 from __future__ import annotations
@@ -23,7 +26,8 @@ from typing import Any
 
 from tqdm import tqdm
 
-from rig_io.atomic import write_text_atomic
+from rig_io.atomic import clean_leftovers, contained, write_text_atomic
+from rig_io.errors import RigIOError
 from rig_io.virtual import simulate_run, standard_campaign
 from rig_io.virtual.campaign import STANDARD_EXCITATIONS
 
@@ -66,7 +70,11 @@ def spec_hash(spec: Mapping[str, Any]) -> str:
 
 
 def target_path(out: Path, run_id: str, fmt: str) -> Path:
-    return out / (f"{run_id}.bag" if fmt == "rosbag1" else run_id)
+    """Where run ``run_id`` goes; :class:`GenerateError` if that is not a plain name in ``out``."""
+    try:
+        return contained(out, f"{run_id}.bag" if fmt == "rosbag1" else run_id)
+    except RigIOError as err:
+        raise GenerateError(f"run_id {run_id!r}: {err}") from None
 
 
 def write_one(spec: dict[str, Any], out: str, fmt: str, compress: bool) -> dict[str, Any]:
@@ -102,6 +110,7 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
         raise GenerateError(f"run ids repeat in the campaign: {dup[:5]}")
     out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
+    clean_leftovers(out, recursive=False)
     book_path = out / CAMPAIGN_FILE
     book: dict[str, Any] = {}
     if book_path.is_file():
@@ -119,6 +128,9 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
         if target.exists() and not overwrite:
             old = known.get(rid, {})
             if old.get("spec_hash") == h and old.get("format") == fmt:
+                # a run folder exists only whole (atomic rename): one killed before its
+                # book entry said "done" is complete
+                known[rid] = {**old, "status": "done"}
                 skipped.append(rid)
                 continue
             raise GenerateError(
@@ -126,6 +138,11 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
                 "raw runs are never rewritten: use another out=, remove it (make clean-data), "
                 "or pass overwrite=true")
         todo.append(spec)
+    for spec in todo:
+        rid = spec["run_id"]
+        known[rid] = _book_entry(spec, fmt, target_path(out, rid, fmt).name, status="pending")
+    if todo or known != book.get("runs", {}):
+        _write_book(book_path, known)
     t0 = time.perf_counter()
     results: list[dict[str, Any]] = []
     bar = tqdm(total=len(todo), desc="generate", unit="run", disable=not progress,
@@ -134,27 +151,36 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
         from joblib import Parallel, delayed
 
         par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered")
-        for res in par(delayed(write_one)(s, str(out), fmt, compress) for s in todo):
-            results.append(res)
-            bar.update(1)
+        stream = par(delayed(write_one)(s, str(out), fmt, compress) for s in todo)
     else:
-        for s in todo:
-            results.append(write_one(s, str(out), fmt, compress))
-            bar.update(1)
+        stream = (write_one(s, str(out), fmt, compress) for s in todo)
+    by_id = {s["run_id"]: s for s in specs}
+    for res in stream:
+        results.append(res)
+        rid = res["run_id"]
+        known[rid] = _book_entry(by_id[rid], fmt, Path(res["path"]).name, status="done")
+        _write_book(book_path, known)
+        bar.update(1)
     bar.close()
     elapsed = time.perf_counter() - t0
-    by_id = {s["run_id"]: s for s in specs}
-    for res in results:
-        rid = res["run_id"]
-        known[rid] = {"spec_hash": spec_hash(by_id[rid]), "format": fmt,
-                      "path": Path(res["path"]).name, "spec": by_id[rid]}
-    book = {"generator": "rig_io.virtual", "runs": dict(sorted(known.items()))}
-    write_text_atomic(book_path, json.dumps(book, indent=1, default=str) + "\n")
+    if not book_path.is_file():
+        _write_book(book_path, known)
     return {"out": str(out), "format": fmt, "written": sorted(r["run_id"] for r in results),
             "skipped": skipped, "seconds": elapsed,
             "simulate_s": sum(r["simulate_s"] for r in results),
             "write_s": sum(r["write_s"] for r in results),
             "cpu_s": sum(r["simulate_cpu_s"] + r["write_cpu_s"] for r in results)}
+
+
+def _book_entry(spec: Mapping[str, Any], fmt: str, name: str, *, status: str
+                ) -> dict[str, Any]:
+    return {"spec_hash": spec_hash(spec), "format": fmt, "path": name, "status": status,
+            "spec": dict(spec)}
+
+
+def _write_book(book_path: Path, known: Mapping[str, Any]) -> None:
+    book = {"generator": "rig_io.virtual", "runs": dict(sorted(known.items()))}
+    write_text_atomic(book_path, json.dumps(book, indent=1, default=str) + "\n")
 
 
 def _plain(node: Any) -> Any:

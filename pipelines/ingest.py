@@ -10,6 +10,13 @@ Every run is read, checked, calibrated, synchronised and normalised by the pure 
 source files, ingest version and options are unchanged is not processed again. Writes
 ``<out>/samples/<run_id>.parquet``, ``<out>/runs.json`` and ``<out>/ingest_report.json``
 (all atomically; never anything in the source folder) and exits 1 when a run was rejected.
+
+``source`` may also be one run (a run folder, a ``.bag`` file or a rosbag2 folder): it is
+ingested alone, and nothing else in ``out`` is pruned. A source that does not exist, holds
+no run is refused (exit 2) and ``out`` is left untouched; one whose runs are all rejected
+writes only its ``ingest_report.json`` (``refused``, exit 1). An empty or wrong source never
+deletes processed data. A processed file that no longer
+matches the hash recorded when it was written (truncated, edited) is processed again.
 """
 
 from __future__ import annotations
@@ -26,13 +33,14 @@ from typing import Any
 
 from tqdm import tqdm
 
-from rig_io.atomic import write_text_atomic
+from rig_io.atomic import clean_leftovers, write_text_atomic
+from rig_io.bag import sidecar_manifest
 from rig_io.dataset import REPORT, SAMPLES, read_runs, run_file, write_run_rows, write_runs
 from rig_io.errors import RigIOError
-from rig_io.importer import IMPORTER_VERSION, load_mapping
+from rig_io.importer import IMPORTER_VERSION, load_mapping, matches
 from rig_io.limits import ReadLimits
 from rig_io.process import INGEST_VERSION, process_run
-from rig_io.sources import Source, discover, hash_files, load
+from rig_io.sources import Source, _looks_like_run_folder, discover, hash_files, load
 from rig_io.synchronise import SyncOptions
 
 
@@ -48,14 +56,28 @@ def run_ingest(source: str | Path, out: str | Path, *,
                progress: bool = True, limits: ReadLimits | None = None) -> dict[str, Any]:
     """Ingest every run under ``source`` into ``out``; return the report (also written)."""
     started = time.perf_counter()
-    src, dst = Path(source).resolve(), Path(out).resolve()
-    if dst == src or src in dst.parents:
-        raise RigIOError("the output folder must not be inside the source folder "
-                         "(raw runs are never written)", file=str(dst))
+    given, dst = Path(source).resolve(), Path(out).resolve()
+    if not given.exists():
+        raise RigIOError("source does not exist (nothing ingested, nothing removed)",
+                         file=str(given))
     sync = sync or SyncOptions()
     plain = load_mapping(mapping) if mapping is not None else None
     opts = options_hash(sync, plain)
-    sources = discover(src, mapping=plain)
+    single = single_run_source(given, mapping=plain)
+    # keys (the cache) are relative to the folder holding the runs, as when it is the source
+    src = given.parent if single is not None else given
+    if dst == src or src in dst.parents:
+        raise RigIOError("the output folder must not be inside the source folder "
+                         "(raw runs are never written)", file=str(dst))
+    if single is not None:
+        sources = [single]
+        prune = False  # one run given: the other processed runs are not "gone"
+    else:
+        sources = discover(src, mapping=plain)
+    if not sources:
+        raise RigIOError("no raw run found in the source (run folders, .bag files, rosbag2 "
+                         "folders); nothing ingested, nothing removed", file=str(given))
+    clean_leftovers(dst)
     old = read_runs(dst)
     by_key = {str(m.get("source_key")): (rid, m) for rid, m in old.items()}
     runs: dict[str, dict[str, Any]] = {}
@@ -75,7 +97,8 @@ def run_ingest(source: str | Path, out: str | Path, *,
         if (not force and cached is not None and cached[1].get("source_hash") == digest
                 and cached[1].get("ingest_version") == INGEST_VERSION
                 and cached[1].get("options_hash") == opts
-                and run_file(dst, cached[0]).is_file() and cached[0] not in runs):
+                and cached[0] not in runs
+                and _output_intact(dst, cached[0], cached[1].get("output_sha256"))):
             runs[cached[0]] = cached[1]
             accepted.append({"run_id": cached[0], "source": key, "status": "unchanged",
                              "n_samples": cached[1].get("n_samples")})
@@ -91,7 +114,8 @@ def run_ingest(source: str | Path, out: str | Path, *,
                     "source_hash": digest, "source_files": hashes, "manifest": phys.manifest,
                     "options_hash": opts, "sync_options": asdict(sync),
                     "ingested_at": datetime.now(UTC).isoformat(timespec="seconds")}
-            write_run_rows(dst, frame, meta)
+            written = write_run_rows(dst, frame, meta)
+            meta["output_sha256"] = file_sha256(written)
         except RigIOError as err:
             rejected.append(_rejection(s, key, err))
             continue
@@ -103,8 +127,20 @@ def run_ingest(source: str | Path, out: str | Path, *,
         runs[phys.run_id] = meta
         accepted.append({"run_id": phys.run_id, "source": key, "status": "processed",
                          "n_samples": meta["n_samples"]})
-    removed = _prune(dst, runs) if prune else []
-    write_runs(dst, runs)
+    refused = None
+    if not accepted:  # a wrong source must not look like "every run was removed"
+        refused = (f"all {len(rejected)} run(s) of the source were rejected: nothing "
+                   "ingested, no processed run removed")
+        removed: list[str] = []
+    elif prune:
+        removed = _prune(dst, runs)
+    else:  # keep the index of the processed runs this ingest did not touch
+        removed = []
+        for rid, m in old.items():
+            if rid not in runs and run_file(dst, rid).is_file():
+                runs[rid] = m
+    if refused is None:
+        write_runs(dst, runs)
     report = {
         "source": str(src), "out": str(dst), "ingest_version": INGEST_VERSION,
         "options_hash": opts, "finished_at": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -112,10 +148,48 @@ def run_ingest(source: str | Path, out: str | Path, *,
         "n_sources": len(sources), "n_accepted": len(accepted), "n_rejected": len(rejected),
         "n_processed": sum(a["status"] == "processed" for a in accepted),
         "n_samples": int(sum(int(runs[a["run_id"]]["n_samples"]) for a in accepted)),
-        "accepted": accepted, "rejected": rejected, "removed": removed,
+        "accepted": accepted, "rejected": rejected, "removed": removed, "refused": refused,
     }
     write_text_atomic(dst / REPORT, json.dumps(report, indent=1, default=str) + "\n")
     return report
+
+
+def single_run_source(path: Path, *, mapping: dict[str, Any] | None = None) -> Source | None:
+    """``path`` as one raw run (run folder, ``.bag``, rosbag2 folder, importable log), or
+    None when it is a folder of runs."""
+    if path.is_dir():
+        if (path / "metadata.yaml").exists():
+            files = sorted(f for f in path.iterdir() if f.is_file())
+            side = sidecar_manifest(path)
+            return Source("rosbag2", path, tuple(files + ([side] if side.exists() else [])))
+        if _looks_like_run_folder(path):
+            return Source("folder", path, tuple(sorted(
+                f for f in path.iterdir() if f.is_file() and not f.name.startswith("."))))
+        return None
+    if path.suffix == ".bag":
+        side = sidecar_manifest(path)
+        return Source("rosbag1", path, (path, side) if side.exists() else (path,))
+    if mapping is not None and matches(mapping, path):
+        return Source("import", path, (path,))
+    raise RigIOError("source is a file that is neither a .bag nor matched by the importer "
+                     "mapping; pass the folder holding the runs", file=str(path))
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _output_intact(dst: Path, run_id: str, recorded: Any) -> bool:
+    """The run's parquet file exists and still has the bytes it was written with."""
+    try:
+        path = run_file(dst, run_id)
+        return isinstance(recorded, str) and path.is_file() and file_sha256(path) == recorded
+    except (OSError, RigIOError):
+        return False
 
 
 def _rejection(s: Source, key: str, err: RigIOError) -> dict[str, Any]:
@@ -172,6 +246,8 @@ def _main() -> None:
               f"{report['elapsed_s']:.1f} s -> {report['out']}", file=sys.stderr)
         for r in report["rejected"]:
             print(f"  rejected {r['source']}: {r['reason']}", file=sys.stderr)
+        if report["refused"]:
+            print(f"ingest: refused: {report['refused']}", file=sys.stderr)
         if report["n_rejected"]:
             raise SystemExit(1)
 

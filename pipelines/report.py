@@ -34,7 +34,7 @@ from pipelines.common import (
 )
 from pipelines.fit import load_models
 from pipelines.stages import Configuration, PipelineError
-from rig_io.atomic import atomic_path, write_text_atomic
+from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 KEY_FILE = "report_key.json"
@@ -195,6 +195,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
 
     start = time.perf_counter()
     paths = Paths.from_config(cfg["paths"])
+    clean_leftovers(paths.reports)  # temporaries of a killed report
     reports = paths.reports
     if metrics is None:
         if not paths.metrics_parquet.exists():
@@ -254,7 +255,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
     jobs = []
     if plot_cfg.get("per_configuration", True):
         for c in configs:
-            out = plots_dir / f"config_{c.label}.png"
+            out = contained(plots_dir, f"config_{c.label}.png")
             title = (f"{c.rig}  phi={c.curve_angle_deg:g} deg  r={c.radius_mm:g} mm"
                      if c.curve_angle_deg is not None and c.radius_mm is not None else c.label)
             jobs.append((c.label, prediction_path(paths.predictions, c), out, title))
@@ -340,7 +341,7 @@ def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fi
     ops = np.asarray(design(u)) if callable(design) else stages.play_operator_outputs(u, p)
     return plots.elementary_figure(
         sub["t_s"].to_numpy(), u, sub["output"].to_numpy(), ops[:, :q.size], q, p,
-        plots_dir / f"elementary_{config.label}.png",
+        contained(plots_dir, f"elementary_{config.label}.png"),
         title=f"Weighted elementary operators q_i gamma_i of Gamma, {config.label} "
               f"({fit_exc}; seed 001 Fig. 4.12)", dpi=dpi, max_points=max_points)
 

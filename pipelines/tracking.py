@@ -22,6 +22,7 @@ import functools
 import logging
 import os
 import random
+import re
 import subprocess
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -220,12 +221,18 @@ class Tracker:
     def init_store(self) -> str:
         """Create the store (schema migrations) and the experiment; idempotent.
 
-        Call this in ONE process before parallel jobs start: concurrent first-time schema
-        creation is what breaks a SQLite store.
+        A local SQLite store is created under an exclusive lock on ``mlflow.db.lock``, so two
+        processes starting at once never both run the schema migration. Runs left RUNNING by
+        a process that died are then ended as FAILED (:func:`end_dead_runs`).
         """
-        if self.settings.tracking_uri.startswith("sqlite:///"):
-            Path(self.settings.tracking_uri[len("sqlite:///"):]).parent.mkdir(
-                parents=True, exist_ok=True)
+        with store_lock(self.settings):
+            exp_id = self._init_store_locked()
+        with contextlib.suppress(Exception):  # housekeeping must never stop a stage
+            end_dead_runs(self)
+        clean_staging_leftovers()
+        return exp_id
+
+    def _init_store_locked(self) -> str:
         client = self.client
         name = self.settings.experiment
         exp = retry(client.get_experiment_by_name, name)
@@ -246,7 +253,8 @@ class Tracker:
     # -- runs -------------------------------------------------------------------------
     def start_run(self, name: str, *, parent_id: str | None = None,
                   tags: Mapping[str, Any] | None = None) -> str:
-        all_tags = {"git_commit": git_commit(), **{k: str(v) for k, v in (tags or {}).items()}}
+        all_tags = {"git_commit": git_commit(), **owner_tags(),
+                    **{k: str(v) for k, v in (tags or {}).items()}}
         if parent_id:
             all_tags["mlflow.parentRunId"] = parent_id
         run = retry(self.client.create_run, self.experiment_id, run_name=name, tags=all_tags)
@@ -311,6 +319,91 @@ def _jsonable(frame: pd.DataFrame) -> pd.DataFrame:
         if out[col].dtype == object or str(out[col].dtype) == "string":
             out[col] = out[col].astype(object).where(out[col].notna(), None)
     return out
+
+
+# --------------------------------------------------------------------------------------
+# run lifecycle: no run stays RUNNING after its process is gone
+# --------------------------------------------------------------------------------------
+
+#: Tags naming the process that owns a run (host tag, pid): a RUNNING run whose process no
+#: longer exists on this host was killed, and the next stage ends it as FAILED.
+HOST_TAG, PID_TAG = "tsm.host", "tsm.pid"
+STAGING_PREFIX = "tsm-mlflow-"
+_STAGING_RE = re.compile(rf"^{STAGING_PREFIX}(?P<host>[0-9a-f]{{8}})-(?P<pid>\d+)-")
+
+
+def owner_tags() -> dict[str, str]:
+    from rig_io.atomic import host_tag
+
+    return {HOST_TAG: host_tag(), PID_TAG: str(os.getpid())}
+
+
+@contextlib.contextmanager
+def store_lock(settings: TrackingSettings) -> Iterator[None]:
+    """Exclusive lock beside a local SQLite store (``mlflow.db.lock``); nothing for a server."""
+    uri = settings.tracking_uri
+    if not uri.startswith("sqlite:///"):
+        yield
+        return
+    import fcntl
+
+    db = Path(uri[len("sqlite:///"):])
+    db.parent.mkdir(parents=True, exist_ok=True)
+    with open(db.with_name(db.name + ".lock"), "a+b") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def end_dead_runs(tracker: Tracker) -> list[str]:
+    """End as FAILED every RUNNING run whose owner process (tags :data:`HOST_TAG`,
+    :data:`PID_TAG`) ran on this host and is gone; return their ids. Runs of other hosts,
+    of live processes and without owner tags are left alone."""
+    from rig_io.atomic import owner_gone
+
+    assert tracker._experiment_id is not None
+    running = retry(tracker.client.search_runs, [tracker._experiment_id],
+                    filter_string="attributes.status = 'RUNNING'", max_results=5000)
+    ended = []
+    for run in running:
+        tags = run.data.tags
+        host, pid = tags.get(HOST_TAG), tags.get(PID_TAG)
+        if host is None or pid is None or not str(pid).isdigit():
+            continue
+        if owner_gone(str(host), int(pid)):
+            tracker.end_run(run.info.run_id, status="FAILED")
+            ended.append(str(run.info.run_id))
+    if ended:
+        log.warning("ended %d MLflow run(s) left RUNNING by a dead process as FAILED",
+                    len(ended))
+    return ended
+
+
+def staging_prefix() -> str:
+    """Prefix of a staging folder in the temp dir, naming its owner (host tag, pid)."""
+    from rig_io.atomic import host_tag
+
+    return f"{STAGING_PREFIX}{host_tag()}-{os.getpid()}-"
+
+
+def clean_staging_leftovers(folder: str | Path | None = None) -> list[Path]:
+    """Remove staging folders (``tsm-mlflow-<host>-<pid>-*``) of dead processes."""
+    import shutil
+    import tempfile
+
+    from rig_io.atomic import owner_gone
+
+    base = Path(folder or tempfile.gettempdir())
+    removed = []
+    with contextlib.suppress(OSError):
+        for p in base.iterdir():
+            m = _STAGING_RE.match(p.name)
+            if m and p.is_dir() and not p.is_symlink() and owner_gone(m["host"], int(m["pid"])):
+                shutil.rmtree(p, ignore_errors=True)
+                removed.append(p)
+    return removed
 
 
 # --------------------------------------------------------------------------------------
@@ -399,7 +492,7 @@ def log_model_runs(
         from tqdm import tqdm
 
         records = tqdm(records, total=len(fits), desc="mlflow", unit="run")
-    with tempfile.TemporaryDirectory(prefix="tsm-mlflow-") as tmp:
+    with tempfile.TemporaryDirectory(prefix=staging_prefix()) as tmp:
         for i, fit in enumerate(records):
             config = Configuration(str(fit["rig"]), _num(fit["curve_angle_deg"]),
                                    _num(fit["radius_mm"]))
@@ -445,8 +538,12 @@ def log_model_runs(
                                         "n_samples": float(fit["n_samples"])}
             if mine is not None:
                 values.update(child_metrics(mine))
-            tracker.log(run_id, params=params, metrics=values)
-            tracker.log_artifact(run_id, staged)
+            try:
+                tracker.log(run_id, params=params, metrics=values)
+                tracker.log_artifact(run_id, staged)
+            except BaseException:
+                tracker.end_run(run_id, status="FAILED")
+                raise
             tracker.end_run(run_id, status="FAILED" if failed else "FINISHED")
             ids.append(run_id)
     return ids
@@ -524,11 +621,22 @@ class MlflowSweepCallback(_HydraCallback):
         (sweep_dir / PARENT_FILE).write_text(self._parent, encoding="utf-8")
         self._prev_env = os.environ.get(PARENT_ENV)
         os.environ[PARENT_ENV] = self._parent
+        import atexit
+
+        atexit.register(self._end_if_open)
+
+    def _end_if_open(self) -> None:
+        """At exit without ``on_multirun_end`` (a job raised): the sweep failed."""
+        if self._tracker is not None and self._parent is not None:
+            with contextlib.suppress(Exception):
+                self._tracker.end_run(self._parent, status="FAILED")
+            self._parent = None
 
     def on_multirun_end(self, config: Any, **kwargs: Any) -> None:
         if self._tracker is None or self._parent is None:
             return
         self._tracker.end_run(self._parent)
+        self._parent = None
         if self._prev_env is None:
             os.environ.pop(PARENT_ENV, None)
         else:

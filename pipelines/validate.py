@@ -35,14 +35,14 @@ from pipelines.common import (
 )
 from pipelines.fit import load_models
 from pipelines.stages import Configuration, RunSignal
-from rig_io.atomic import atomic_path, write_text_atomic
+from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 META_KEY = b"tsm_validate"
 
 
 def prediction_path(predictions_dir: Path, config: Configuration) -> Path:
-    return predictions_dir / f"{config.label}.parquet"
+    return contained(predictions_dir, f"{config.label}.parquet")
 
 
 def read_prediction_meta(path: Path) -> dict[str, Any] | None:
@@ -103,6 +103,8 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     ``fits`` defaults to every model file under ``${paths.models}`` in the selection.
     """
     paths = Paths.from_config(cfg["paths"])
+    clean_leftovers(paths.predictions)  # temporaries of a killed validate
+    clean_leftovers(paths.reports, recursive=False)
     if dataset is None:
         dataset = read_processed(paths.processed)
     sig = cfg.get("signals") or {}

@@ -1,36 +1,156 @@
-"""Atomic writes: a temporary name beside the target, then ``os.replace``.
+"""Atomic, durable, contained writes.
 
-A crash never leaves a half-written file (or folder) that looks whole.
+* :func:`atomic_path` yields a temporary name beside the target; on success the content is
+  fsynced, renamed onto the target and the folder fsynced, so a crash (even a power cut)
+  never leaves a half-written file or folder under the target's name.
+* A folder cannot be replaced in one step: the old folder is renamed aside, the new one
+  renamed in, then the old one removed. If the process dies in between, the target is either
+  the old complete folder, the new complete folder, or absent with the old one aside;
+  :func:`clean_leftovers` (called by each stage on its output roots when it starts) puts the
+  old one back in the last case and removes temporaries of dead writers.
+* :func:`contained` builds an output path from data (run ids, rig names ...) and refuses any
+  that would land outside its output root.
+
+Temporary names carry the writer's host and process id, ``.<name>.tsmtmp-<host>-<pid>-<random>
+<suffix>.tmp`` and ``.<name>.tsmold-<host>-<pid>``, so a cleaner removes only leftovers of
+processes that are gone, never a parallel job's file in flight, and never anything else.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
+import re
 import shutil
+import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from rig_io.errors import RigIOError
+
+TMP_TAG = "tsmtmp"
+OLD_TAG = "tsmold"
+_TMP_RE = re.compile(rf"^\.(?P<name>.+)\.{TMP_TAG}-(?P<host>[0-9a-f]{{8}})-(?P<pid>\d+)-.*\.tmp$")
+_OLD_RE = re.compile(rf"^\.(?P<name>.+)\.{OLD_TAG}-(?P<host>[0-9a-f]{{8}})-(?P<pid>\d+)$")
+
+
+def host_tag() -> str:
+    """Short, file-name-safe tag of this host (temporary names, MLflow run tags)."""
+    return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+
+
+def _owner() -> str:
+    return f"{host_tag()}-{os.getpid()}"
+
+
+def pid_alive(pid: int) -> bool:
+    """True when a process with this id exists on this host (signal 0 probes, sends nothing)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def owner_gone(host: str, pid: int) -> bool:
+    """True only when the writer ran on this host and its process no longer exists."""
+    return host == host_tag() and pid != os.getpid() and not pid_alive(pid)
+
+
+# --------------------------------------------------------------------------------------
+# containment
+# --------------------------------------------------------------------------------------
+
+
+def safe_part(part: object, *, what: str = "path component") -> str:
+    """``part`` as a single file-name component, or :class:`RigIOError` if it is not one."""
+    text = str(part)
+    bad = (not text or text in (".", "..") or "/" in text or "\\" in text or "\x00" in text
+           or (os.altsep is not None and os.altsep in text) or Path(text).is_absolute())
+    if bad:
+        raise RigIOError(f"unsafe {what} {text!r}: an output name must be one plain file name "
+                         "(no '/', '\\', '..', absolute path or empty name)")
+    return text
+
+
+def contained(root: str | os.PathLike[str], *parts: object) -> Path:
+    """``root / part / ...`` after checking that each part is one plain name and that the
+    resolved result (symlinks followed) lies under the resolved ``root``."""
+    names = [safe_part(p) for p in parts]
+    path = Path(root).joinpath(*names)
+    base = Path(root).resolve()
+    real = path.resolve()
+    if real != base and base not in real.parents:
+        raise RigIOError(f"output path {str(path)!r} resolves to {str(real)!r}, outside its "
+                         f"output folder {str(base)!r}")
+    return path
+
+
+# --------------------------------------------------------------------------------------
+# durability
+# --------------------------------------------------------------------------------------
+
+
+def _fsync_fd_of(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def fsync_dir(folder: Path) -> None:
+    """Make a rename or a new entry in ``folder`` durable (no-op where unsupported)."""
+    with contextlib.suppress(OSError):
+        _fsync_fd_of(folder)
+
+
+def fsync_tree(path: Path) -> None:
+    """fsync a file, or every file and folder under a folder (symlinks skipped)."""
+    if path.is_symlink():
+        return
+    if path.is_file():
+        _fsync_fd_of(path)
+        return
+    if path.is_dir():
+        for dirpath, _dirs, files in os.walk(path):
+            for f in files:
+                p = Path(dirpath) / f
+                if not p.is_symlink():
+                    _fsync_fd_of(p)
+            fsync_dir(Path(dirpath))
+
+
+# --------------------------------------------------------------------------------------
+# atomic replace
+# --------------------------------------------------------------------------------------
+
 
 def _replace(src: Path, target: Path) -> None:
-    """Move ``src`` onto ``target``; a folder target is moved aside first (no one-step
-    replace exists for folders) and removed once ``src`` stands in its place."""
-    if target.is_dir() and src.is_dir():
-        old = target.with_name(f".{target.name}.old")
+    """Move the complete, synced ``src`` onto ``target``, durably."""
+    if target.is_dir() and not target.is_symlink() and src.is_dir():
+        old = target.with_name(f".{target.name}.{OLD_TAG}-{_owner()}")
         if old.exists():
             shutil.rmtree(old)
         os.replace(target, old)
         os.replace(src, target)
+        fsync_dir(target.parent)
         shutil.rmtree(old)
     else:
         os.replace(src, target)
+        fsync_dir(target.parent)
 
 
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike[str], *, suffix: str = "",
                 keep_name: bool = False) -> Iterator[Path]:
-    """Yield a temporary path beside ``target``; rename it onto ``target`` on success.
+    """Yield a temporary path beside ``target``; sync and rename it onto ``target`` on success.
 
     Works for files and for folders (the caller creates what it needs at the yielded path).
     With ``keep_name`` the yielded path has ``target``'s own name, inside a hidden temporary
@@ -39,27 +159,28 @@ def atomic_path(target: str | os.PathLike[str], *, suffix: str = "",
     """
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
+    prefix = f".{target.name}.{TMP_TAG}-{_owner()}-"
     holder: Path | None = None
     if keep_name:
-        holder = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=f"{suffix}.tmp",
-                                       dir=target.parent))
+        holder = Path(tempfile.mkdtemp(prefix=prefix, suffix=f"{suffix}.tmp", dir=target.parent))
         tmp = holder / target.name
     else:
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f"{suffix}.tmp",
+        fd, tmp_name = tempfile.mkstemp(prefix=prefix, suffix=f"{suffix}.tmp",
                                         dir=target.parent)
         os.close(fd)
         tmp = Path(tmp_name)
         tmp.unlink()  # the caller decides whether this becomes a file or a folder
     try:
         yield tmp
+        fsync_tree(tmp)
         _replace(tmp, target)
     finally:
         for leftover in (tmp, holder):
             if leftover is None:
                 continue
-            if leftover.is_dir():
+            if leftover.is_dir() and not leftover.is_symlink():
                 shutil.rmtree(leftover, ignore_errors=True)
-            elif leftover.exists():
+            elif leftover.exists() or leftover.is_symlink():
                 leftover.unlink()
 
 
@@ -75,3 +196,52 @@ def write_bytes_atomic(target: str | os.PathLike[str], data: bytes) -> Path:
     with atomic_path(target) as tmp:
         tmp.write_bytes(data)
     return Path(target)
+
+
+# --------------------------------------------------------------------------------------
+# recovery
+# --------------------------------------------------------------------------------------
+
+
+def is_temporary(name: str) -> bool:
+    """True for a name :func:`atomic_path` uses for its temporaries (any writer)."""
+    return bool(_TMP_RE.match(name) or _OLD_RE.match(name))
+
+
+def clean_leftovers(root: str | os.PathLike[str], *, recursive: bool = True) -> list[Path]:
+    """Finish or undo what writers killed mid-way left under ``root``; return what was done.
+
+    Only names of our own temporary pattern whose writer is gone (same host, dead pid) are
+    touched: a temporary is removed; a folder set aside by an interrupted folder replace is
+    put back when the target is missing (the old complete state), else removed. Live
+    writers' temporaries and every other file are left alone.
+    """
+    base = Path(root)
+    if not base.is_dir():
+        return []
+    touched: list[Path] = []
+    for dirpath, dirs, files in os.walk(base):
+        here = Path(dirpath)
+        for name in sorted([*dirs, *files]):
+            m_tmp, m_old = _TMP_RE.match(name), _OLD_RE.match(name)
+            m = m_tmp or m_old
+            if m is None or not owner_gone(m["host"], int(m["pid"])):
+                continue
+            path = here / name
+            if m_old is not None:
+                target = here / m["name"]
+                if not target.exists() and not target.is_symlink():
+                    os.replace(path, target)
+                    fsync_dir(here)
+                    touched.append(target)
+                    continue
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                with contextlib.suppress(FileNotFoundError):
+                    path.unlink()
+            touched.append(path)
+        # temporaries were handled whole above; do not walk into them
+        dirs[:] = [d for d in dirs if not is_temporary(d) and (here / d).is_dir()] \
+            if recursive else []
+    return touched

@@ -22,7 +22,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from rig_io.atomic import atomic_path, write_text_atomic
+from rig_io.atomic import atomic_path, contained, safe_part, write_text_atomic
 from rig_io.errors import RigIOError
 from rig_io.schema import ARROW_SCHEMA, COLUMNS, SCHEMA_VERSION, validate
 
@@ -34,7 +34,13 @@ META_KEY = b"tsm_run"
 
 
 def run_file(out: str | os.PathLike[str], run_id: str) -> Path:
-    return Path(out) / SAMPLES / f"{run_id}.parquet"
+    """``<out>/samples/<run_id>.parquet``; a run id that is not one plain file name (``/``,
+    ``..``, absolute) is refused, so no run is written outside ``out`` or lost in a subfolder."""
+    try:
+        name = safe_part(run_id, what="run_id")
+    except RigIOError as err:
+        raise RigIOError(err.reason, run=str(run_id)) from None
+    return contained(out, SAMPLES, f"{name}.parquet")
 
 
 def write_run_rows(out: str | os.PathLike[str], frame: pd.DataFrame,
@@ -74,9 +80,16 @@ def read_dataset(path: str | os.PathLike[str], *, runs: list[str] | None = None,
         p = p / SAMPLES
     if p.is_dir():
         files = sorted(p.glob("*.parquet"))
+        nested = sorted(str(f.relative_to(p)) for f in p.rglob("*.parquet") if f.parent != p)
+        if nested:
+            raise RigIOError(f"parquet files in subfolders of the dataset ({nested[:5]}): run "
+                             "ids must be plain names; re-ingest into a fresh folder", file=str(p))
         if runs is not None:
-            wanted = set(runs)
+            wanted = {safe_part(r, what="run_id") for r in runs}
             files = [f for f in files if f.stem in wanted]
+            missing = sorted(wanted - {f.stem for f in files})
+            if missing:
+                raise RigIOError(f"run(s) {missing[:10]} not in dataset", file=str(p))
         if not files:
             raise RigIOError("no runs in dataset", file=str(p))
     elif p.is_file():

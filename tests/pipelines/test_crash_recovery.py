@@ -1,0 +1,144 @@
+"""kill -9 a stage at a random moment, run the same command again: it completes, leaves no
+temporary file and no RUNNING MLflow run, and its outputs are byte-identical to those of an
+uninterrupted run.
+
+``TSM_CRASH_ROUNDS=<n>`` repeats the kill-and-rerun sequence n times with fresh random
+moments (the default 1 keeps the test near 40 s); ``TSM_CRASH_SEED`` fixes the moments.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from mlflow import MlflowClient
+
+from rig_io.atomic import host_tag, is_temporary
+from tests.pipelines.pipeline_data import mlflow_store
+
+STAGES: dict[str, list[str]] = {
+    "generate": ["pipelines.generate", "campaign=quick", "campaign.radii_mm=[30,60,75]",
+                 "campaign.excitations=[{kind:sine_decay,amplitudes_mm:[3.0],"
+                 "periods_per_amplitude:2,frequency_hz:0.5}]", "n_jobs=1"],
+    "ingest": ["pipelines.ingest"],
+    "fit": ["pipelines.fit", "families=[linear,gamma]", "n_jobs=1"],
+}
+
+
+def _cmd(stage: str, root: Path) -> list[str]:
+    module, *args = STAGES[stage]
+    return [sys.executable, "-m", module, *args, f"paths.root={root}", "progress=false",
+            f"hydra.run.dir={root}/outputs/{stage}"]
+
+
+def _env() -> dict[str, str]:
+    env = {**os.environ, "MPLBACKEND": "Agg", "HYDRA_FULL_ERROR": "1"}
+    env.pop("TSM_MLFLOW_PARENT_RUN_ID", None)
+    return env
+
+
+def _run(stage: str, root: Path) -> float:
+    t0 = time.perf_counter()
+    proc = subprocess.run(_cmd(stage, root), cwd=root, env=_env(), capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, f"{stage}: {proc.stderr[-3000:]}"
+    return time.perf_counter() - t0
+
+
+def _kill_at(stage: str, root: Path, after_s: float) -> int:
+    proc = subprocess.Popen(_cmd(stage, root), cwd=root, env=_env(),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        proc.wait(timeout=after_s)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    return proc.pid
+
+
+def _outputs(root: Path) -> dict[str, object]:
+    """Every output file under ``root/data`` as bytes, except three that carry wall-clock
+    time: ``runs.json`` without its ``ingested_at`` fields, a model file without
+    ``fit_seconds`` (everything else of both is compared), and the ingest report, which
+    describes the last invocation (timings, "unchanged" vs "processed"), by its accepted ids."""
+    out: dict[str, object] = {}
+    for p in sorted((root / "data").rglob("*")):
+        if not p.is_file():
+            continue
+        rel = p.relative_to(root).as_posix()
+        if p.name == "runs.json":
+            doc = json.loads(p.read_text())
+            for meta in doc["runs"].values():
+                meta.pop("ingested_at")
+            out[rel] = doc
+        elif p.name == "ingest_report.json":
+            out[rel] = sorted(a["run_id"] for a in json.loads(p.read_text())["accepted"])
+        elif "interim/models" in rel:
+            doc = json.loads(p.read_text())
+            doc.pop("fit_seconds")
+            out[rel] = doc
+        else:
+            out[rel] = p.read_bytes()
+    return out
+
+
+def test_kill_minus_9_at_random_moments_then_the_same_command_recovers(
+        tmp_path: Path) -> None:
+    seed = int(os.environ.get("TSM_CRASH_SEED", time.time_ns() % 1_000_000))
+    rounds = int(os.environ.get("TSM_CRASH_ROUNDS", "1"))
+    rng = random.Random(seed)
+    root = tmp_path / "root"
+    root.mkdir()
+    mlflow_store(root)
+    durations = {stage: _run(stage, root) for stage in STAGES}
+    reference = _outputs(root)
+    assert len([k for k in reference if k.endswith(".parquet")]) == 6
+    killed: list[tuple[str, float, int]] = []
+    for _ in range(rounds):
+        shutil.rmtree(root)
+        root.mkdir()
+        mlflow_store(root)
+        for stage in STAGES:
+            moment = rng.uniform(0.2, durations[stage])
+            killed.append((stage, round(moment, 2), _kill_at(stage, root, moment)))
+            _run(stage, root)
+        where = f"seed {seed}, kills {killed}"
+        leftovers = [p for p in root.rglob("*") if is_temporary(p.name)]
+        assert leftovers == [], where
+        staging = [p for p in Path(tempfile.gettempdir()).glob(f"tsm-mlflow-{host_tag()}-*")
+                   if any(p.name.startswith(f"tsm-mlflow-{host_tag()}-{pid}-")
+                          for _, _, pid in killed)]
+        assert staging == [], where
+        client = MlflowClient(f"sqlite:///{root}/mlflow.db")
+        exp = client.get_experiment_by_name("tsm-hysteresis")
+        running = client.search_runs([exp.experiment_id], "attributes.status = 'RUNNING'")
+        assert running == [], where
+        assert _outputs(root) == reference, where
+
+
+def test_a_campaign_killed_before_its_book_is_final_is_completed(tmp_path: Path) -> None:
+    """The case that used to break every later run: runs on disk the book did not list."""
+    root = tmp_path / "root"
+    root.mkdir()
+    _run("generate", root)
+    raw = root / "data" / "raw" / "virtual"
+    book = json.loads((raw / "campaign.json").read_text())
+    reference = {p.relative_to(raw).as_posix(): p.read_bytes() for p in raw.rglob("*")
+                 if p.is_file()}
+    # as if killed after the second run landed and before the book said so
+    for rid in list(book["runs"])[1:]:
+        book["runs"][rid]["status"] = "pending"
+    (raw / "campaign.json").write_text(json.dumps(book))
+    shutil.rmtree(raw / list(book["runs"])[-1])
+    _run("generate", root)
+    again = {p.relative_to(raw).as_posix(): p.read_bytes() for p in raw.rglob("*")
+             if p.is_file()}
+    assert again == reference
