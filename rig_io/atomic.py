@@ -87,8 +87,8 @@ def contained(root: str | os.PathLike[str], *parts: object) -> Path:
     base = Path(root).resolve()
     real = path.resolve()
     if real != base and base not in real.parents:
-        raise RigIOError(f"output path {str(path)!r} resolves to {str(real)!r}, outside its "
-                         f"output folder {str(base)!r}")
+        raise RigIOError(f"resolves outside its output folder {str(base)!r} (to {str(real)!r})",
+                         file=str(path))
     return path
 
 
