@@ -306,6 +306,9 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
             hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, plots=None,
             stage="pipeline", progress=bool(cfg.get("progress", True)),
         )
+        from pipelines import lineage
+
+        lineage.log_model_inputs(tracker, ids, fits, metrics, processed=paths.processed)
         labels = [Configuration(str(r["rig"]), tracking._num(r["curve_angle_deg"]),
                                 tracking._num(r["radius_mm"])).label
                   for r in fits.to_dict("records")]
