@@ -66,6 +66,7 @@ bench: $(STAMP)
 	$(PY) -m bench.run --out bench/results.json
 
 ui: $(STAMP)
+	@echo "runs table: http://127.0.0.1:5000/#/experiments/1?workflowType=machine_learning"
 	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/mlflow.db --host 127.0.0.1 --port 5000
 
 compensate: $(STAMP)
