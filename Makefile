@@ -18,7 +18,7 @@ REPORT ?= data/reports/discrepancy.json
 
 .PHONY: help venv data generate ingest fit validate report pipeline test bench ui \
         compensate discrepancy discrepancy-study lint typecheck clean clean-data \
-        venv-team chromium postgresql cluster-check ui-check bench-cluster
+        venv-team chromium postgresql cluster-check ui-check team-test bench-cluster
 
 help:
 	@echo "make pipeline    generate -> ingest -> fit -> validate -> report (virtual rig, local MLflow)"
@@ -116,6 +116,13 @@ postgresql:
 ui-check: $(TEAM_STAMP) chromium
 	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
 	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/pipelines/test_ui_browser.py
+
+# The tests that need the team extras: the UI check above and tracking=server against a
+# throwaway PostgreSQL + MLflow server (tests/pipelines/test_tracking_server.py). CI runs it.
+team-test: $(TEAM_STAMP) chromium postgresql
+	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
+	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/pipelines/test_ui_browser.py \
+	  tests/pipelines/test_tracking_server.py
 
 # Throwaway PostgreSQL + MLflow server + Ray head on 127.0.0.1, a 24-job fit sweep through
 # hydra's Ray launcher, runs counted in the server: prints `lost N`, exits 0 only for lost 0.

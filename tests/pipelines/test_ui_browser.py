@@ -19,7 +19,8 @@ from pathlib import Path
 import pytest
 
 sync_api = pytest.importorskip(
-    "playwright.sync_api", reason="browser check needs playwright: `make ui-check` (CI runs it)")
+    "playwright.sync_api",
+    reason="browser check needs playwright: `make ui-check` or `make team-test` (CI)")
 
 from pipelines import localserv  # noqa: E402
 from pipelines.run_all import compose_stage, run_pipeline  # noqa: E402
