@@ -131,7 +131,7 @@ cluster-check: $(TEAM_STAMP) postgresql
 
 # The same sweep machinery at 100 jobs: Ray launcher vs joblib launcher wall time.
 bench-cluster: $(TEAM_STAMP) postgresql
-	$(TEAM_PY) -m bench.bench_cluster --out bench/results_cluster.json
+	$(TEAM_PY) -m bench.bench_cluster --out bench/results_cluster.json $(ARGS)
 
 clean-data:
 	rm -rf data/raw/virtual data/processed data/reports data/interim mlflow.db mlartifacts

@@ -122,7 +122,8 @@ def dataset_input(runs: Sequence[RunLineage], *, context: str, processed: Path) 
                      source=json.dumps({"uri": uri}), profile=json.dumps(profile))
     tags = [InputTag(CONTEXT_TAG, context),
             InputTag("run_ids", _fit(",".join(r.run_id for r in runs))),
-            InputTag("raw_hashes", _fit(",".join(f"{r.run_id}={r.raw_hash}" for r in runs))),
+            InputTag("raw_hashes",
+                     _fit(",".join(f"{r.run_id}={r.raw_hash[:16]}" for r in runs))),
             InputTag("processed_hashes",
                      _fit(",".join(f"{r.run_id}={r.processed_hash}" for r in runs)))]
     return DatasetInput(dataset=entity, tags=tags)
@@ -193,3 +194,36 @@ def _heldout_excitations(metrics: pd.DataFrame | None, fit: Mapping[str, Any]) -
     keep = [_same(_num(a), phi) and _same(_num(b), r)
             for a, b in zip(sel["curve_angle_deg"], sel["radius_mm"], strict=True)]
     return {str(x) for x in sel.loc[keep, "eval_excitation"]}
+
+
+def log_stage_inputs(tracker: Any, run_id: str, metrics: pd.DataFrame, *, processed: Path,
+                     dataset: pd.DataFrame | None = None) -> int:
+    """A validate stage's run: per configuration in ``metrics``, the identification data of
+    its models (``training``) and the held-out data they were scored on (``validation``)."""
+    from pipelines.tracking import retry
+
+    if metrics.empty:
+        return 0
+    keys = metrics[["rig", "curve_angle_deg", "radius_mm", "fit_excitation"]].drop_duplicates()
+    labels = {_label(str(k["rig"]), _num(k["curve_angle_deg"]), _num(k["radius_mm"]))
+              for k in keys.to_dict("records")}
+    runs = run_lineage(processed, dataset, labels=labels)
+    inputs = []
+    for k in keys.to_dict("records"):
+        phi, r = _num(k["curve_angle_deg"]), _num(k["radius_mm"])
+        mine = [x for x in runs.values() if x.rig == str(k["rig"])
+                and _same(x.curve_angle_deg, phi) and _same(x.radius_mm, r)]
+        sel = metrics[(metrics["split"] == "heldout") & (metrics["rig"] == k["rig"])
+                      & (metrics["fit_excitation"] == k["fit_excitation"])]
+        held_exc = {str(x) for a, b, x in zip(sel["curve_angle_deg"], sel["radius_mm"],
+                                              sel["eval_excitation"], strict=True)
+                    if _same(_num(a), phi) and _same(_num(b), r)}
+        train = [x for x in mine if x.excitation == str(k["fit_excitation"])]
+        held = [x for x in mine if x.excitation in held_exc]
+        if train:
+            inputs.append(dataset_input(train, context="training", processed=processed))
+        if held:
+            inputs.append(dataset_input(held, context="validation", processed=processed))
+    for i in range(0, len(inputs), 500):
+        retry(tracker.client.log_inputs, run_id, datasets=inputs[i:i + 500])
+    return len(inputs)

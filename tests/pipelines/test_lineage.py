@@ -93,6 +93,14 @@ def test_model_runs_log_training_and_validation_datasets_and_raw_changes_show(
     assert after["validation"][:2] == (vname, vdigest)
     tracker.end_run(parent)
 
+    # a validate stage's own run: per configuration, its training and validation data
+    stage = tracker.start_run("validate", tags={"kind": "parent"})
+    assert lineage.log_stage_inputs(tracker, stage, metrics, processed=processed) == 2
+    staged = _inputs(client, stage)
+    assert staged["training"][:2] == after["training"][:2]
+    assert staged["validation"][:2] == (vname, vdigest)
+    tracker.end_run(stage)
+
 
 def test_fit_only_runs_log_their_training_data_and_dataset_layout_without_runs_json(
         tmp_path: Path) -> None:
