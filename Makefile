@@ -17,7 +17,8 @@ RUNS ?= data/raw/virtual
 REPORT ?= data/reports/discrepancy.json
 
 .PHONY: help venv data generate ingest fit validate report pipeline test bench ui \
-        compensate discrepancy discrepancy-study lint typecheck clean clean-data
+        compensate discrepancy discrepancy-study lint typecheck clean clean-data \
+        venv-team chromium postgresql cluster-check ui-check team-test bench-cluster
 
 help:
 	@echo "make pipeline    generate -> ingest -> fit -> validate -> report (virtual rig, local MLflow)"
@@ -65,6 +66,7 @@ bench: $(STAMP)
 	$(PY) -m bench.run --out bench/results.json
 
 ui: $(STAMP)
+	@echo "runs table: http://127.0.0.1:5000/#/experiments/1?workflowType=machine_learning"
 	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/mlflow.db --host 127.0.0.1 --port 5000
 
 compensate: $(STAMP)
@@ -82,8 +84,57 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy
 
+# --- team scale: registry browser check, PostgreSQL + MLflow server + Ray cluster -------------
+# Heavy extras (ray, hydra-ray-launcher, psycopg2, playwright) live in requirements-team.lock and
+# in their own venv, so .venv and `make test` do not grow. Debian's postgresql and chromium are
+# installed with apt-get when missing (playwright drives the system chromium: no browser download).
+TEAM_VENV := .venv-team
+TEAM_PY := $(TEAM_VENV)/bin/python
+TEAM_STAMP := $(TEAM_VENV)/.installed
+
+$(TEAM_STAMP): requirements.lock requirements-team.lock pyproject.toml
+	test -x $(TEAM_PY) || $(PYTHON_BOOT) -m venv $(TEAM_VENV)
+	$(TEAM_PY) -m pip install --quiet --upgrade pip
+	$(TEAM_PY) -m pip install --quiet -r requirements.lock
+	$(TEAM_PY) -m pip install --quiet -r requirements-team.lock
+	$(TEAM_PY) -m pip check
+	$(TEAM_PY) -c 'import site,sys; open(site.getsitepackages()[0]+"/tsm_hysteresis.pth","w").write(sys.argv[1]+"\n")' $(CURDIR)
+	touch $(TEAM_STAMP)
+
+venv-team: $(TEAM_STAMP)
+
+chromium:
+	@command -v chromium >/dev/null || command -v chromium-browser >/dev/null || \
+	  { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium; }
+
+postgresql:
+	@test -n "$$(ls /usr/lib/postgresql/*/bin/initdb 2>/dev/null)" || command -v initdb >/dev/null || \
+	  { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends postgresql; }
+
+# The MLflow UI in headless chromium: runs table and a run page of a small pipeline's store;
+# screenshot to data/reports/ui/.
+ui-check: $(TEAM_STAMP) chromium
+	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
+	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/pipelines/test_ui_browser.py
+
+# The tests that need the team extras: the UI check above and tracking=server against a
+# throwaway PostgreSQL + MLflow server (tests/pipelines/test_tracking_server.py). CI runs it.
+team-test: $(TEAM_STAMP) chromium postgresql
+	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
+	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/pipelines/test_ui_browser.py \
+	  tests/pipelines/test_tracking_server.py
+
+# Throwaway PostgreSQL + MLflow server + Ray head on 127.0.0.1, a 24-job fit sweep through
+# hydra's Ray launcher, runs counted in the server: prints `lost N`, exits 0 only for lost 0.
+cluster-check: $(TEAM_STAMP) postgresql
+	$(TEAM_PY) -m pipelines.cluster_check $(ARGS)
+
+# The same sweep machinery at 100 jobs: Ray launcher vs joblib launcher wall time.
+bench-cluster: $(TEAM_STAMP) postgresql
+	$(TEAM_PY) -m bench.bench_cluster --out bench/results_cluster.json $(ARGS)
+
 clean-data:
 	rm -rf data/raw/virtual data/processed data/reports data/interim mlflow.db mlartifacts
 
 clean: clean-data
-	rm -rf $(VENV) outputs multirun .pytest_cache
+	rm -rf $(VENV) $(TEAM_VENV) outputs multirun .pytest_cache

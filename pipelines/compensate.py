@@ -157,6 +157,16 @@ def _fit_family(name: str, u: np.ndarray, y: np.ndarray, params: Mapping[str, An
     return make_family(name, **dict(params)).fit(u, y)
 
 
+def _registry_model(ours_cfg: Mapping[str, Any], rig: str, phi: float, r: float) -> Any:
+    """The configuration's registered champion (``ours.registry``: the registered-model
+    prefix; the store is the stage's ``tracking`` group) instead of a fresh identification."""
+    from pipelines import registry
+
+    name = registry.registered_name(rig, phi, r, prefix=str(ours_cfg["registry"]))
+    return registry.load_champion(name, tracking_uri=str(ours_cfg["tracking_uri"]),
+                                  alias=str(ours_cfg.get("registry_alias", registry.ALIAS)))
+
+
 def _family_params(cfg: Mapping[str, Any], name: str) -> dict[str, Any]:
     return dict((cfg.get("family_params") or {}).get(name) or {})
 
@@ -280,7 +290,10 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
             fit_rows.append({"shape": label, "curve_angle_deg": phi, "radius_mm": r,
                              "family": fam, "fit_s": time.perf_counter() - t0,
                              "fit_rmse": float(np.sqrt(np.mean((pred - y_id) ** 2)))})
-        ours_model = _fit_family(str(ours_cfg["family"]), u_id, y_id, ours_cfg.get("params") or {})
+        ours_model = (_registry_model(ours_cfg, str(cfg["rig"]), phi, r)
+                      if ours_cfg.get("registry") else
+                      _fit_family(str(ours_cfg["family"]), u_id, y_id,
+                                  ours_cfg.get("params") or {}))
         profiles = dict(cfg["profiles"])
         if depth == "quick":
             profiles = {k: v for k, v in profiles.items() if k in cfg["quick"]["profiles"]}
@@ -685,6 +698,13 @@ def run(cfg: Mapping[str, Any], *, backend: RigBackend | None = None) -> dict[st
         sub = cfgd.get(name) or {}
         if not sub.get("enabled", False):
             continue
+        if (sub.get("ours") or {}).get("registry"):
+            from pipelines.tracking import settings_from_config
+
+            uri = settings_from_config(cfgd.get("tracking") or {},
+                                       root=(cfgd.get("paths") or {}).get("root", ".")
+                                       ).tracking_uri
+            sub = {**sub, "ours": {**sub["ours"], "tracking_uri": uri}}
         t1 = time.perf_counter()
         tables.update(fn(sub, backend, art, seed=seed, progress=progress))
         log.info("%s done in %.1f s", name, time.perf_counter() - t1)

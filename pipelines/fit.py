@@ -285,12 +285,16 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
             base = tracking.flatten({k: v for k, v in plain.items()
                                      if k not in ("family", "family_overrides", "tracking")})
             hydra_dir = hydra_output_dir()
-            tracking.log_model_runs(
+            ids = tracking.log_model_runs(
                 tracker, stage_run.parent_id, fits=fits,
                 metrics=fit_metrics(fits, dataset, plain), base_params=base,
                 tags={"dataset_hash": dataset_hash(paths.processed)},
                 hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, stage="fit",
             )
+            from pipelines import lineage
+
+            lineage.log_model_inputs(tracker, ids, fits, None, processed=paths.processed,
+                                     dataset=dataset)
     return fits
 
 

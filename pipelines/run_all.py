@@ -239,6 +239,13 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
             # time spent on MLflow beyond the stages it overlapped with
             result.timings["tracking"] = time.perf_counter() - t0
             result.timings["tracking_overlapped"] = tracking_state.seconds
+    if tracker.enabled:
+        from pipelines import registry
+
+        t0 = time.perf_counter()
+        registry.register_pipeline(tracker, cfg, fits=result.fits, metrics=result.metrics,
+                                   processed=paths.processed)
+        result.timings["registry"] = time.perf_counter() - t0
     result.timings["total"] = time.perf_counter() - total
     write_text_atomic(paths.reports / "pipeline_timing.json",
                       json.dumps({k: round(v, 3) for k, v in result.timings.items()}, indent=1))
@@ -301,6 +308,9 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
             hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, plots=None,
             stage="pipeline", progress=bool(cfg.get("progress", True)),
         )
+        from pipelines import lineage
+
+        lineage.log_model_inputs(tracker, ids, fits, metrics, processed=paths.processed)
         labels = [Configuration(str(r["rig"]), tracking._num(r["curve_angle_deg"]),
                                 tracking._num(r["radius_mm"])).label
                   for r in fits.to_dict("records")]

@@ -188,6 +188,25 @@ def child_metrics(metrics: pd.DataFrame) -> dict[str, float]:
 
 
 # --------------------------------------------------------------------------------------
+# the experiment's kind
+# --------------------------------------------------------------------------------------
+
+
+#: Experiment tag the MLflow UI reads to pick an experiment's landing page: with
+#: ``custom_model_development`` it opens the runs table (not the GenAI traces overview).
+EXPERIMENT_KIND_TAG = "mlflow.experimentKind"
+EXPERIMENT_KIND = "custom_model_development"
+
+
+def set_experiment_kind(client: Any, experiment_id: str, experiment: Any = None) -> None:
+    """Tag the experiment as classic model development (idempotent; one read, at most one
+    write) so the UI lands on its runs, whatever MLflow would otherwise infer."""
+    tags = dict(getattr(experiment, "tags", None) or {}) if experiment is not None else {}
+    if tags.get(EXPERIMENT_KIND_TAG) != EXPERIMENT_KIND:
+        retry(client.set_experiment_tag, experiment_id, EXPERIMENT_KIND_TAG, EXPERIMENT_KIND)
+
+
+# --------------------------------------------------------------------------------------
 # the tracker
 # --------------------------------------------------------------------------------------
 
@@ -247,6 +266,7 @@ class Tracker:
                 exp_id = exp.experiment_id
         else:
             exp_id = exp.experiment_id
+        set_experiment_kind(client, str(exp_id), exp)
         self._experiment_id = str(exp_id)
         return self._experiment_id
 

@@ -225,6 +225,10 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
                         params=tracking.flatten({k: v for k, v in plain.items()
                                                  if k != "tracking"}),
                         tags={"dataset_hash": dataset_hash(paths.processed)})
+            from pipelines import lineage
+
+            lineage.log_stage_inputs(tracker, stage_run.parent_id, metrics,
+                                     processed=paths.processed)
             tracker.log_table(stage_run.parent_id, metrics, "metrics.json")
             tracker.log_artifact(stage_run.parent_id, paths.metrics_csv, "tables")
             hydra_dir = hydra_output_dir()

@@ -1,0 +1,229 @@
+"""Dataset lineage in MLflow: every model run names the data it was fitted and scored on.
+
+Each child run (one fitted model) gets MLflow dataset inputs (``MlflowClient.log_inputs``,
+what ``mlflow.log_input`` writes), shown in the UI's *Dataset* column and on the run page:
+
+* ``training``: the processed identification run(s) of its configuration,
+* ``validation``: the processed held-out runs it was scored on (when validated).
+
+A dataset's **name** says what it is (``<configuration>:<excitations>``, e.g.
+``tsm-bench_phi090_r030:sine_decay``); its **digest** is a hash over, per run, the processed
+file's content hash and the raw source hash that ingest recorded in ``runs.json``: a run
+whose raw data changed is a dataset with the same name and a different digest. Its
+**source** is the raw run folder (or bag) it came from; the input tags list the run ids and
+their raw hashes, so any metric traces back to the raw runs it was computed from.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from pipelines import cache
+
+log = logging.getLogger(__name__)
+
+#: MLflow's input-tag key for a dataset's role (shown as the dataset's context in the UI).
+CONTEXT_TAG = "mlflow.data.context"
+_MAX_TAG = 500  # MLflow's limit on an input tag value
+
+
+@dataclass(frozen=True)
+class RunLineage:
+    """Where one processed run came from."""
+
+    run_id: str
+    rig: str
+    curve_angle_deg: float | None
+    radius_mm: float | None
+    excitation: str
+    n_samples: int
+    processed_hash: str
+    raw_hash: str
+    raw_source: str
+
+
+def run_lineage(processed: Path, dataset: pd.DataFrame | None = None, *,
+                labels: set[str] | None = None) -> dict[str, RunLineage]:
+    """Per processed run: configuration, excitation, processed and raw content hashes.
+
+    The processed hash is the hash of the run's parquet file (``samples/<run_id>.parquet``)
+    or, for a dataset not in that layout, of its rows; the raw hash and source come from the
+    ingest's ``runs.json`` (``unknown`` / the processed folder without one). ``labels``
+    limits it to those configurations (a sweep job hashes only its own runs).
+    """
+    processed = Path(processed)
+    index: dict[str, Any] = {}
+    runs_json = processed / "runs.json"
+    if runs_json.is_file():
+        index = dict(json.loads(runs_json.read_text(encoding="utf-8")).get("runs") or {})
+    samples = processed / "samples"
+    cols = ["run_id", "rig", "curve_angle_deg", "radius_mm", "excitation"]
+    if dataset is None:  # per-run files hash themselves; otherwise the rows are hashed
+        if samples.is_dir():
+            dataset = pd.read_parquet(samples, columns=cols)
+        else:
+            dataset = pd.read_parquet(processed) if processed.exists() else pd.DataFrame(
+                columns=cols)
+    out: dict[str, RunLineage] = {}
+    for run_id, rows in dataset.groupby("run_id", sort=True, observed=True):
+        rid = str(run_id)
+        first = rows.iloc[0]
+        if labels is not None and _label(str(first["rig"]), _num(first["curve_angle_deg"]),
+                                         _num(first["radius_mm"])) not in labels:
+            continue
+        file = samples / f"{rid}.parquet"
+        p_hash = (cache.hash_files([file]) if file.is_file()
+                  else cache.hash_frame(rows.reset_index(drop=True)))
+        meta = index.get(rid) or {}
+        out[rid] = RunLineage(
+            run_id=rid, rig=str(first["rig"]), curve_angle_deg=_num(first["curve_angle_deg"]),
+            radius_mm=_num(first["radius_mm"]), excitation=str(first["excitation"]),
+            n_samples=len(rows), processed_hash=p_hash,
+            raw_hash=str(meta.get("source_hash") or "unknown"),
+            raw_source=str(meta.get("source_path") or processed))
+    return out
+
+
+def _num(value: Any) -> float | None:
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        return None
+    return None if f != f else f
+
+
+def _label(rig: str, phi: float | None, r: float | None) -> str:
+    from pipelines.stages import Configuration
+
+    return Configuration(rig, phi, r).label
+
+
+def dataset_input(runs: Sequence[RunLineage], *, context: str, processed: Path) -> Any:
+    """One MLflow ``DatasetInput`` for a set of processed runs of one configuration."""
+    from mlflow.entities import Dataset, DatasetInput, InputTag
+
+    runs = sorted(runs, key=lambda r: r.run_id)
+    first = runs[0]
+    excitations = sorted({r.excitation for r in runs})
+    name = f"{_label(first.rig, first.curve_angle_deg, first.radius_mm)}:{'+'.join(excitations)}"
+    digest = cache.hash_json([[r.run_id, r.processed_hash, r.raw_hash] for r in runs])
+    sources = sorted({r.raw_source for r in runs})
+    uri = sources[0] if len(sources) == 1 else _common_parent(sources)
+    profile = {"runs": len(runs), "samples": sum(r.n_samples for r in runs),
+               "processed": str(processed), "raw_sources": sources[:20]}
+    entity = Dataset(name=name, digest=digest, source_type="local",
+                     source=json.dumps({"uri": uri}), profile=json.dumps(profile))
+    tags = [InputTag(CONTEXT_TAG, context),
+            InputTag("run_ids", _fit(",".join(r.run_id for r in runs))),
+            InputTag("raw_hashes",
+                     _fit(",".join(f"{r.run_id}={r.raw_hash[:16]}" for r in runs))),
+            InputTag("processed_hashes",
+                     _fit(",".join(f"{r.run_id}={r.processed_hash}" for r in runs)))]
+    return DatasetInput(dataset=entity, tags=tags)
+
+
+def _fit(text: str) -> str:
+    return text if len(text) <= _MAX_TAG else text[:_MAX_TAG - 12] + f"...(+{len(text)})"
+
+
+def _common_parent(paths: Iterable[str]) -> str:
+    import os
+
+    try:
+        return os.path.commonpath(list(paths))
+    except ValueError:
+        return ";".join(paths)[:1000]
+
+
+def log_model_inputs(tracker: Any, run_ids: Sequence[str], fits: pd.DataFrame,
+                     metrics: pd.DataFrame | None, *, processed: Path,
+                     dataset: pd.DataFrame | None = None,
+                     lineage: Mapping[str, RunLineage] | None = None) -> int:
+    """Log the training (and, with ``metrics``, validation) datasets of each child run.
+
+    ``run_ids[i]`` is the run logged for ``fits.iloc[i]`` (what ``log_model_runs`` returns).
+    Returns the number of dataset inputs logged.
+    """
+    from pipelines.tracking import retry
+
+    if not run_ids:
+        return 0
+    if lineage is None:
+        wanted = {_label(str(f["rig"]), _num(f["curve_angle_deg"]), _num(f["radius_mm"]))
+                  for f in fits.to_dict("records")}
+        lineage = run_lineage(processed, dataset, labels=wanted)
+    runs = dict(lineage)
+    n = 0
+    for run_id, fit in zip(run_ids, fits.to_dict("records"), strict=True):
+        inputs = []
+        train = [runs[r] for r in str(fit.get("fit_run_ids") or "").split(",") if r in runs]
+        if train:
+            inputs.append(dataset_input(train, context="training", processed=processed))
+        held_exc = _heldout_excitations(metrics, fit)
+        if held_exc:
+            phi, r = _num(fit["curve_angle_deg"]), _num(fit["radius_mm"])
+            held = [x for x in runs.values()
+                    if x.rig == str(fit["rig"]) and _same(x.curve_angle_deg, phi)
+                    and _same(x.radius_mm, r) and x.excitation in held_exc]
+            if held:
+                inputs.append(dataset_input(held, context="validation", processed=processed))
+        if inputs:
+            retry(tracker.client.log_inputs, run_id, datasets=inputs)
+            n += len(inputs)
+    return n
+
+
+def _same(a: float | None, b: float | None) -> bool:
+    return (a is None and b is None) or (a is not None and b is not None and abs(a - b) < 1e-9)
+
+
+def _heldout_excitations(metrics: pd.DataFrame | None, fit: Mapping[str, Any]) -> set[str]:
+    if metrics is None or metrics.empty:
+        return set()
+    sel = metrics[(metrics["split"] == "heldout") & (metrics["family"] == fit["family"])
+                  & (metrics["rig"] == fit["rig"])
+                  & (metrics["fit_excitation"] == fit["fit_excitation"])]
+    phi, r = _num(fit["curve_angle_deg"]), _num(fit["radius_mm"])
+    keep = [_same(_num(a), phi) and _same(_num(b), r)
+            for a, b in zip(sel["curve_angle_deg"], sel["radius_mm"], strict=True)]
+    return {str(x) for x in sel.loc[keep, "eval_excitation"]}
+
+
+def log_stage_inputs(tracker: Any, run_id: str, metrics: pd.DataFrame, *, processed: Path,
+                     dataset: pd.DataFrame | None = None) -> int:
+    """A validate stage's run: per configuration in ``metrics``, the identification data of
+    its models (``training``) and the held-out data they were scored on (``validation``)."""
+    from pipelines.tracking import retry
+
+    if metrics.empty:
+        return 0
+    keys = metrics[["rig", "curve_angle_deg", "radius_mm", "fit_excitation"]].drop_duplicates()
+    labels = {_label(str(k["rig"]), _num(k["curve_angle_deg"]), _num(k["radius_mm"]))
+              for k in keys.to_dict("records")}
+    runs = run_lineage(processed, dataset, labels=labels)
+    inputs = []
+    for k in keys.to_dict("records"):
+        phi, r = _num(k["curve_angle_deg"]), _num(k["radius_mm"])
+        mine = [x for x in runs.values() if x.rig == str(k["rig"])
+                and _same(x.curve_angle_deg, phi) and _same(x.radius_mm, r)]
+        sel = metrics[(metrics["split"] == "heldout") & (metrics["rig"] == k["rig"])
+                      & (metrics["fit_excitation"] == k["fit_excitation"])]
+        held_exc = {str(x) for a, b, x in zip(sel["curve_angle_deg"], sel["radius_mm"],
+                                              sel["eval_excitation"], strict=True)
+                    if _same(_num(a), phi) and _same(_num(b), r)}
+        train = [x for x in mine if x.excitation == str(k["fit_excitation"])]
+        held = [x for x in mine if x.excitation in held_exc]
+        if train:
+            inputs.append(dataset_input(train, context="training", processed=processed))
+        if held:
+            inputs.append(dataset_input(held, context="validation", processed=processed))
+    for i in range(0, len(inputs), 500):
+        retry(tracker.client.log_inputs, run_id, datasets=inputs[i:i + 500])
+    return len(inputs)

@@ -1,0 +1,343 @@
+"""MLflow Model Registry: the best family of each configuration, loadable by name.
+
+After ``make pipeline`` every configuration (rig x curve angle x radius) has one registered
+model, ``<prefix>.<configuration label>`` (e.g. ``tsm.tsm-bench_phi090_r030``), whose alias
+``champion`` points at the version holding the family with the lowest held-out RMSE. Each
+version is an MLflow *pyfunc* logged into the child run of the model it wraps (so the
+registry links back to the run, its metrics and its dataset), tagged with the held-out
+metrics, the family, the model key and the processed data hash:
+
+    import mlflow, pandas as pd
+    model = mlflow.pyfunc.load_model("models:/tsm.tsm-bench_phi090_r030@champion")
+    y = model.predict(pd.DataFrame({"input": u}))["output"].to_numpy()
+
+``predict`` takes a DataFrame with an ``input`` column (optional ``state``: the start state in
+its first row, as written by :func:`encode_state`) and returns a DataFrame with ``output``,
+exactly the family's own ``predict``. A controller that needs the model object itself (e.g.
+its ``invert``) gets it with :func:`load_champion`.
+
+Everything goes through :class:`mlflow.MlflowClient`, so the same code registers into the
+local SQLite store and into a shared tracking server.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import json
+import logging
+import tempfile
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import mlflow.pyfunc
+import numpy as np
+import pandas as pd
+from mlflow.pyfunc.model import PythonModel
+
+from hysteresis.base import HysteresisModel, _decode, _encode
+
+log = logging.getLogger(__name__)
+
+ALIAS = "champion"
+DEFAULT_PREFIX = "tsm"
+#: Artifact folder of the pyfunc inside the model's child run.
+ARTIFACT_PATH = "registered_model"
+#: Held-out metrics copied onto a model version as tags (``heldout.<m>``).
+TAG_METRICS = ("rmse", "mean_abs_error", "std_error", "error_range", "sse")
+
+
+class RegistryError(Exception):
+    """No champion where one was asked for, or a model that cannot be registered."""
+
+
+# --------------------------------------------------------------------------------------
+# the pyfunc wrapper
+# --------------------------------------------------------------------------------------
+
+
+def encode_state(state: Any) -> str:
+    """A family's state (dataclass, array, tuple, float) as JSON for the ``state`` column."""
+    def enc(obj: Any) -> Any:
+        if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+            cls = type(obj)
+            return {"__state__": f"{cls.__module__}:{cls.__qualname__}",
+                    "fields": {f.name: enc(getattr(obj, f.name))
+                               for f in dataclasses.fields(obj)}}
+        if isinstance(obj, tuple):
+            return {"__tuple__": [enc(v) for v in obj]}
+        return _encode(obj)
+
+    return json.dumps(enc(state))
+
+
+def decode_state(text: str) -> Any:
+    """The inverse of :func:`encode_state`."""
+    def dec(obj: Any) -> Any:
+        if isinstance(obj, dict) and "__state__" in obj:
+            module, qualname = str(obj["__state__"]).split(":")
+            cls: Any = importlib.import_module(module)
+            for part in qualname.split("."):
+                cls = getattr(cls, part)
+            return cls(**{k: dec(v) for k, v in obj["fields"].items()})
+        if isinstance(obj, dict) and "__tuple__" in obj:
+            return tuple(dec(v) for v in obj["__tuple__"])
+        if isinstance(obj, dict) and "__ndarray__" in obj:
+            return _decode(obj)
+        if isinstance(obj, dict):
+            return {k: dec(v) for k, v in obj.items()}
+        if isinstance(obj, list):
+            return [dec(v) for v in obj]
+        return obj
+
+    return dec(json.loads(text))
+
+
+def predict_frame(model: HysteresisModel, frame: pd.DataFrame) -> pd.DataFrame:
+    """What the registered pyfunc's ``predict`` does: ``input`` (+ optional ``state``) in,
+    ``output`` out, through the family's own ``predict``."""
+    if "input" not in frame.columns:
+        raise RegistryError(f"the model input needs an 'input' column, got {list(frame.columns)}")
+    u = frame["input"].to_numpy(dtype=np.float64)
+    state = None
+    if "state" in frame.columns and len(frame) and isinstance(frame["state"].iloc[0], str) \
+            and frame["state"].iloc[0]:
+        state = decode_state(str(frame["state"].iloc[0]))
+    y = model.predict(u) if state is None else model.predict(u, state=state)
+    return pd.DataFrame({"output": np.asarray(y, dtype=np.float64)}, index=frame.index)
+
+
+class HysteresisPyfunc(PythonModel):
+    """The registered pyfunc: the model JSON is its one artifact."""
+
+    def load_context(self, context: Any) -> None:
+        text = Path(context.artifacts["model_json"]).read_text(encoding="utf-8")
+        self.model = HysteresisModel.from_json(text)
+
+    def predict(self, context: Any, model_input: pd.DataFrame,
+                params: dict[str, Any] | None = None) -> pd.DataFrame:
+        return predict_frame(self.model, pd.DataFrame(model_input))
+
+
+def save_pyfunc(model_json: str, path: Path) -> Path:
+    """Write the pyfunc model folder (MLmodel, the model JSON, a signature) to ``path``."""
+    from mlflow.models import ModelSignature
+    from mlflow.types import ColSpec, Schema
+
+    with tempfile.TemporaryDirectory(prefix="tsm-pyfunc-") as tmp:
+        src = Path(tmp) / "model.json"
+        src.write_text(model_json, encoding="utf-8")
+        signature = ModelSignature(
+            inputs=Schema([ColSpec("double", "input"),
+                           ColSpec("string", "state", required=False)]),
+            outputs=Schema([ColSpec("double", "output")]))
+        # Explicit requirements: inferring them would load the model in a subprocess per save.
+        # The signature documents the input; an example would only repeat it.
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*input example was not provided.*")
+            mlflow.pyfunc.save_model(
+                str(path), python_model=HysteresisPyfunc(), artifacts={"model_json": str(src)},
+                signature=signature, pip_requirements=_requirements())
+    return path
+
+
+def _requirements() -> list[str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = []
+    for dist in ("mlflow", "numpy", "pandas", "scipy", "numba"):
+        try:
+            out.append(f"{dist}=={version(dist)}")
+        except PackageNotFoundError:  # pragma: no cover - all are in requirements.lock
+            continue
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# choosing and registering champions
+# --------------------------------------------------------------------------------------
+
+
+def registered_name(rig: str, curve_angle_deg: float | None, radius_mm: float | None, *,
+                    prefix: str = DEFAULT_PREFIX) -> str:
+    """``<prefix>.<configuration label>``: one registered model per rig and configuration."""
+    from pipelines.stages import Configuration
+
+    return f"{prefix}.{Configuration(rig, curve_angle_deg, radius_mm).label}"
+
+
+def choose_champions(fits: pd.DataFrame, metrics: pd.DataFrame, *, metric: str = "rmse",
+                     fit_excitation: str | None = None) -> pd.DataFrame:
+    """The fit row with the lowest mean held-out ``metric`` per configuration.
+
+    Configurations without held-out rows fall back to the fit split. Failed fits never win.
+    Adds ``heldout.<m>`` columns (the mean over held-out excitations) and ``score``.
+    """
+    from pipelines.stages import _num
+
+    ok = fits[fits["error"].isna()] if "error" in fits.columns else fits
+    if fit_excitation is not None:
+        ok = ok[ok["fit_excitation"] == fit_excitation]
+    keys = ["family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation"]
+    rows = []
+    for fit in ok.to_dict("records"):
+        sel = metrics[(metrics["family"] == fit["family"]) & (metrics["rig"] == fit["rig"])
+                      & (metrics["fit_excitation"] == fit["fit_excitation"])
+                      & _same(metrics["curve_angle_deg"], _num(fit["curve_angle_deg"]))
+                      & _same(metrics["radius_mm"], _num(fit["radius_mm"]))]
+        held = sel[sel["split"] == "heldout"]
+        use = held if not held.empty else sel[sel["split"] == "fit"]
+        if use.empty:
+            continue
+        means = {f"heldout.{m}": float(use[m].astype(float).mean())
+                 for m in TAG_METRICS if m in use.columns}
+        score = float(use[metric].astype(float).mean())
+        if score != score:
+            continue
+        rows.append({**fit, **means, "score": score,
+                     "score_split": "heldout" if not held.empty else "fit"})
+    if not rows:
+        return pd.DataFrame(columns=[*fits.columns, "score"])
+    frame = pd.DataFrame(rows)
+    frame["_cfg"] = frame.apply(lambda r: registered_name(
+        str(r["rig"]), _num(r["curve_angle_deg"]), _num(r["radius_mm"]), prefix=""), axis=1)
+    best = frame.sort_values(["_cfg", "score", "family"]).groupby("_cfg", sort=True).head(1)
+    return best.drop(columns="_cfg").sort_values(keys[1:4]).reset_index(drop=True)
+
+
+def _same(column: pd.Series, value: float | None) -> pd.Series:
+    col = pd.to_numeric(column, errors="coerce")
+    return col.isna() if value is None else (col - value).abs() < 1e-9
+
+
+@dataclass(frozen=True)
+class Registered:
+    name: str
+    version: str
+    family: str
+    run_id: str
+    new: bool
+
+
+def register_champions(tracker: Any, fits: pd.DataFrame, metrics: pd.DataFrame, *,
+                       data_hash: str, prefix: str = DEFAULT_PREFIX, alias: str = ALIAS,
+                       fit_excitation: str | None = None) -> list[Registered]:
+    """Register each configuration's champion and point ``alias`` at it.
+
+    The pyfunc goes into the child run already logged for that model (found by its
+    ``model_key`` tag). A configuration whose current champion already wraps the same model
+    key on the same data is left as it is (a rerun with nothing changed adds no version).
+    """
+    from mlflow.exceptions import MlflowException
+
+    from pipelines.stages import _num
+    from pipelines.tracking import retry
+
+    client = tracker.client
+    out: list[Registered] = []
+    for champ in choose_champions(fits, metrics, fit_excitation=fit_excitation).to_dict(
+            "records"):
+        name = registered_name(str(champ["rig"]), _num(champ["curve_angle_deg"]),
+                               _num(champ["radius_mm"]), prefix=prefix)
+        key = str(champ["key"])
+        try:
+            current = retry(client.get_model_version_by_alias, name, alias)
+        except MlflowException:
+            current = None
+        if current is not None and current.tags.get("model_key") == key \
+                and current.tags.get("dataset_hash") == data_hash:
+            out.append(Registered(name, str(current.version), str(champ["family"]),
+                                  str(current.run_id), False))
+            continue
+        runs = tracker.find_runs(f"tags.model_key = '{key}' and tags.kind = 'model'")
+        if not runs:
+            log.warning("registry: no run logged for model %s (%s); %s not registered",
+                        key, champ["family"], name)
+            continue
+        run_id = str(runs[0].info.run_id)
+        with tempfile.TemporaryDirectory(prefix="tsm-register-") as tmp:
+            folder = save_pyfunc(str(champ["model_json"]), Path(tmp) / ARTIFACT_PATH)
+            tracker.log_artifact(run_id, folder, ARTIFACT_PATH)
+        try:
+            retry(client.create_registered_model, name, tags={
+                "rig": str(champ["rig"]), "curve_angle_deg": _tag(champ["curve_angle_deg"]),
+                "radius_mm": _tag(champ["radius_mm"])},
+                description="Best model family of this sheath configuration (lowest "
+                            "held-out RMSE); alias 'champion' is the current one.")
+        except MlflowException as exc:
+            if "RESOURCE_ALREADY_EXISTS" not in str(exc) and "already exists" not in str(exc):
+                raise
+        tags = {"family": str(champ["family"]), "model_key": key, "dataset_hash": data_hash,
+                "fit_excitation": str(champ["fit_excitation"]),
+                "fit_run_ids": str(champ["fit_run_ids"]),
+                "score_split": str(champ["score_split"]),
+                **{k: repr(float(v)) for k, v in champ.items()
+                   if k.startswith("heldout.") and v == v}}
+        artifact_uri = str(retry(client.get_run, run_id).info.artifact_uri)
+        version = retry(client.create_model_version, name,
+                        f"{artifact_uri.rstrip('/')}/{ARTIFACT_PATH}", run_id=run_id, tags=tags)
+        retry(client.set_registered_model_alias, name, alias, version.version)
+        out.append(Registered(name, str(version.version), str(champ["family"]), run_id, True))
+    log.info("registry: %d configurations, %d new versions", len(out),
+             sum(r.new for r in out))
+    return out
+
+
+def _tag(value: Any) -> str:
+    from pipelines.stages import _num
+
+    v = _num(value)
+    return "NA" if v is None else f"{v:g}"
+
+
+def load_champion(name: str, *, tracking_uri: str, alias: str = ALIAS) -> HysteresisModel:
+    """The family object behind ``models:/<name>@<alias>`` (for ``invert``, ``simulate``)."""
+    from pipelines.tracking import retry
+
+    mlflow.set_registry_uri(tracking_uri)
+    mlflow.set_tracking_uri(tracking_uri)
+    try:
+        loaded = retry(mlflow.pyfunc.load_model, f"models:/{name}@{alias}")
+    except Exception as exc:
+        raise RegistryError(f"no model {name}@{alias} in {tracking_uri}: {exc}") from exc
+    model = loaded.unwrap_python_model().model
+    if not isinstance(model, HysteresisModel):  # pragma: no cover - our own wrapper
+        raise RegistryError(f"{name}@{alias} is not a hysteresis model")
+    return model
+
+
+def champion_table(tracker: Any, names: Sequence[str] | None = None, *,
+                   prefix: str = DEFAULT_PREFIX, alias: str = ALIAS) -> pd.DataFrame:
+    """One row per registered model with its champion version and tags."""
+    from pipelines.tracking import retry
+
+    client = tracker.client
+    if names is None:
+        models = retry(client.search_registered_models, f"name LIKE '{prefix}.%'",
+                       max_results=1000)
+        names = sorted(m.name for m in models)
+    rows: list[Mapping[str, Any]] = []
+    for name in names:
+        mv = retry(client.get_model_version_by_alias, name, alias)
+        rows.append({"name": name, "version": mv.version, "run_id": mv.run_id, **mv.tags})
+    return pd.DataFrame(rows)
+
+
+def register_pipeline(tracker: Any, cfg: Mapping[str, Any], *, fits: pd.DataFrame | None,
+                      metrics: pd.DataFrame | None, processed: Path) -> list[Registered]:
+    """``make pipeline``'s last step: register the champions when the ``tracking.registry``
+    config asks for it and this invocation fitted and validated."""
+    from pipelines.common import dataset_hash
+
+    reg = dict((cfg.get("tracking") or {}).get("registry") or {})
+    if not tracker.enabled or not reg.get("enabled", False) or fits is None \
+            or metrics is None or fits.empty or metrics.empty:
+        return []
+    fit_excitations = list(cfg.get("fit_excitations") or ["sine_decay"])
+    return register_champions(
+        tracker, fits, metrics, data_hash=dataset_hash(processed),
+        prefix=str(reg.get("prefix", DEFAULT_PREFIX)), alias=str(reg.get("alias", ALIAS)),
+        fit_excitation=str(fit_excitations[0]))

@@ -1,0 +1,160 @@
+"""Model registry: one registered model per configuration, alias ``champion`` on the family
+with the lowest held-out RMSE, loadable as a pyfunc in a fresh process."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hysteresis.base import HysteresisModel
+from pipelines import fit as fit_stage
+from pipelines import registry, tracking
+from pipelines import validate as validate_stage
+from tests.pipelines.pipeline_data import make_dataset, mlflow_store, stage_cfg
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def registered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+    root = tmp_path_factory.mktemp("registry")
+    data = make_dataset(angles=(15, 90), radii=(30,), dt=0.2)
+    cfg = stage_cfg(root, heldout=["triangle_decay", "trapezoid_decay"])
+    fits = fit_stage.run(cfg, dataset=data)
+    metrics, _ = validate_stage.run(cfg, dataset=data)
+    mlflow_store(root)
+    tracker = tracking.Tracker(tracking.settings_from_config({}, root=root))
+    parent = tracker.start_run("pipeline", tags={"kind": "parent"})
+    tracking.log_model_runs(tracker, parent, fits=fits, metrics=metrics, base_params={},
+                            tags={"dataset_hash": "h1"})
+    tracker.end_run(parent)
+    done = registry.register_champions(tracker, fits, metrics, data_hash="h1")
+    return {"root": root, "data": data, "fits": fits, "metrics": metrics, "tracker": tracker,
+            "done": done}
+
+
+def test_one_champion_per_configuration_with_the_lowest_heldout_rmse(
+        registered: dict[str, object]) -> None:
+    done = registered["done"]
+    metrics = registered["metrics"]
+    tracker = registered["tracker"]
+    assert isinstance(done, list) and isinstance(metrics, pd.DataFrame)
+    assert sorted(r.name for r in done) == ["tsm.tsm-bench_phi015_r030",
+                                            "tsm.tsm-bench_phi090_r030"]
+    assert all(r.new for r in done)
+    held = metrics[metrics["split"] == "heldout"].groupby(
+        ["curve_angle_deg", "family"])["rmse"].mean()
+    table = registry.champion_table(tracker).set_index("name")
+    assert len(table) == 2
+    for phi in (15, 90):
+        row = table.loc[f"tsm.tsm-bench_phi{phi:03d}_r030"]
+        best = held.loc[float(phi)]
+        assert row["family"] == best.idxmin()
+        assert float(row["heldout.rmse"]) == pytest.approx(best.min(), rel=1e-12)
+        assert row["dataset_hash"] == "h1"
+    # the version lives in the model's own child run (registry -> run -> dataset lineage)
+    run = tracker.client.get_run(table.iloc[0]["run_id"])
+    assert run.data.tags["model_key"] == table.iloc[0]["model_key"]
+    # the large curve angle has real hysteresis: a hysteresis family wins there, not linear
+    assert table.loc["tsm.tsm-bench_phi090_r030"]["family"] != "linear"
+
+
+def test_registering_again_with_nothing_changed_adds_no_version(
+        registered: dict[str, object]) -> None:
+    tracker = registered["tracker"]
+    fits, metrics = registered["fits"], registered["metrics"]
+    assert isinstance(fits, pd.DataFrame) and isinstance(metrics, pd.DataFrame)
+    again = registry.register_champions(tracker, fits, metrics, data_hash="h1")
+    assert [r.new for r in again] == [False, False]
+    moved = registry.register_champions(tracker, fits, metrics, data_hash="h2")
+    assert [r.version for r in moved] == ["2", "2"]  # new data: a new champion version
+    assert registry.champion_table(tracker)["dataset_hash"].tolist() == ["h2", "h2"]
+
+
+def test_pyfunc_in_a_fresh_process_equals_the_familys_predict(
+        registered: dict[str, object], tmp_path: Path) -> None:
+    root, fits, data = registered["root"], registered["fits"], registered["data"]
+    assert isinstance(fits, pd.DataFrame) and isinstance(data, pd.DataFrame)
+    assert isinstance(root, Path)
+    tracker = registered["tracker"]
+    table = registry.champion_table(tracker)
+    u = data.loc[data["excitation"] == "triangle_decay", "input"].to_numpy()[:400]
+    np.save(tmp_path / "u.npy", u)
+    code = (
+        "import sys, mlflow, numpy as np, pandas as pd\n"
+        "mlflow.set_tracking_uri(sys.argv[1])\n"
+        "for name in sys.argv[3:]:\n"
+        "    m = mlflow.pyfunc.load_model(f'models:/{name}@champion')\n"
+        "    y = m.predict(pd.DataFrame({'input': np.load(sys.argv[2] + '/u.npy')}))\n"
+        "    np.save(f'{sys.argv[2]}/{name}.npy', y['output'].to_numpy())\n"
+    )
+    uri = tracker.settings.tracking_uri  # type: ignore[attr-defined]
+    subprocess.run([sys.executable, "-c", code, uri, str(tmp_path), *table["name"]],
+                   check=True, cwd=tmp_path, timeout=120)
+    for row in table.to_dict("records"):
+        model_json = fits.loc[fits["key"] == row["model_key"], "model_json"].iloc[0]
+        own = HysteresisModel.from_json(str(model_json)).predict(u)
+        got = np.load(tmp_path / f"{row['name']}.npy")
+        assert got.shape == own.shape
+        assert np.max(np.abs(got - own)) <= 1e-12
+
+
+def test_state_column_continues_from_a_state_and_load_champion_gives_the_family(
+        registered: dict[str, object]) -> None:
+    tracker, data, fits = registered["tracker"], registered["data"], registered["fits"]
+    assert isinstance(data, pd.DataFrame) and isinstance(fits, pd.DataFrame)
+    name = "tsm.tsm-bench_phi090_r030"
+    uri = tracker.settings.tracking_uri  # type: ignore[attr-defined]
+    model = registry.load_champion(name, tracking_uri=uri)
+    champ = registry.champion_table(tracker).set_index("name").loc[name]
+    assert isinstance(model, HysteresisModel) and model.to_dict()["family"] == champ["family"]
+    u = data.loc[data["excitation"] == "sine_decay", "input"].to_numpy()[:300]
+    stateful, memory = 0, 0.0
+    for model_json in fits["model_json"]:
+        fam = HysteresisModel.from_json(str(model_json))
+        whole = fam.predict(u)
+        if not hasattr(fam, "simulate"):
+            continue
+        stateful += 1
+        _, state = fam.simulate(u[:150])
+        text = registry.encode_state(state)
+        json.loads(text)  # plain JSON in the frame
+        frame = pd.DataFrame({"input": u[150:], "state": [text] + [None] * (len(u) - 151)})
+        second = registry.predict_frame(fam, frame)["output"].to_numpy()
+        assert np.max(np.abs(second - whole[150:])) <= 1e-12
+        rest = registry.predict_frame(fam, frame[["input"]])["output"].to_numpy()
+        memory = max(memory, float(np.max(np.abs(rest - whole[150:]))))
+    assert stateful >= 2  # linear and gamma both carry a state
+    # without the state a hysteresis model restarts from rest: the state column matters
+    assert memory > 1e-3
+    with pytest.raises(registry.RegistryError):
+        registry.predict_frame(model, pd.DataFrame({"u": u}))
+    with pytest.raises(registry.RegistryError):
+        registry.load_champion("tsm.no-such-model", tracking_uri=uri)
+
+
+def test_compensation_takes_its_model_from_the_registry_when_configured(
+        registered: dict[str, object]) -> None:
+    from pipelines import compensate
+
+    tracker = registered["tracker"]
+    uri = tracker.settings.tracking_uri  # type: ignore[attr-defined]
+    model = compensate._registry_model({"registry": "tsm", "tracking_uri": uri},
+                                       "tsm-bench", 90.0, 30.0)
+    champ = registry.champion_table(tracker).set_index("name").loc["tsm.tsm-bench_phi090_r030"]
+    assert model.to_dict()["family"] == champ["family"]
+    fits = registered["fits"]
+    assert isinstance(fits, pd.DataFrame)
+    own = HysteresisModel.from_json(str(fits.loc[fits["key"] == champ["model_key"],
+                                                 "model_json"].iloc[0]))
+    u = np.linspace(-3.0, 3.0, 50)
+    assert np.array_equal(model.predict(u), own.predict(u))
+    with pytest.raises(registry.RegistryError):  # shape B was never registered here
+        compensate._registry_model({"registry": "tsm", "tracking_uri": uri},
+                                   "tsm-bench", 60.0, 60.0)

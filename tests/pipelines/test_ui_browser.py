@@ -1,0 +1,108 @@
+"""The MLflow UI as users see it: a small ``make pipeline``, the UI on loopback (what
+``make ui`` runs), headless chromium. The link ``make ui`` prints opens the experiment's runs
+table (not the GenAI traces overview); the table lists the pipeline's runs with their
+datasets; a run page shows ``heldout.rmse``; screenshots go to ``data/reports/ui/``; no process
+is left behind.
+
+Needs playwright and a system chromium: ``make ui-check`` installs both (requirements-team.lock,
+apt-get) and runs this file; CI runs that target. In the base venv (``make test``) playwright
+is absent and the module is skipped at collection, saying so.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+sync_api = pytest.importorskip(
+    "playwright.sync_api",
+    reason="browser check needs playwright: `make ui-check` or `make team-test` (CI)")
+
+from pipelines import localserv  # noqa: E402
+from pipelines.run_all import compose_stage, run_pipeline  # noqa: E402
+from tests.pipelines.pipeline_data import mlflow_store  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+SHOTS = Path(os.environ.get("TSM_UI_SHOTS", REPO / "data" / "reports" / "ui"))
+SHORT = [f"campaign.excitations.{i}.periods_per_amplitude=2" for i in range(3)]
+
+
+def _listed(stage: str, overrides: list[str]) -> str:
+    return f"overrides.{stage}=[{','.join(repr(o) for o in overrides)}]"
+
+
+def _chromium() -> str:
+    path = os.environ.get("TSM_CHROMIUM") or shutil.which("chromium") \
+        or shutil.which("chromium-browser")
+    if not path:
+        pytest.fail("no system chromium: `make ui-check` installs Debian's chromium")
+    return path
+
+
+def test_ui_lists_the_pipelines_runs_and_a_run_page_shows_heldout_rmse(tmp_path: Path) -> None:
+    mlflow_store(tmp_path)
+    cfg = compose_stage("pipeline", [
+        f"paths.root={tmp_path}", "n_jobs=1", "progress=false",
+        _listed("generate", ["campaign=quick", "n_jobs=1", "progress=false", *SHORT]),
+        _listed("ingest", ["progress=false"]),
+        _listed("fit", ["families=[linear,gamma]"]),
+        _listed("report", ["plots.dpi=40"]),
+    ])
+    result = run_pipeline(cfg)
+    assert result.parent_run_id is not None
+    from mlflow import MlflowClient
+
+    client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
+    exp = client.get_experiment_by_name("tsm-hysteresis")
+    children = client.search_runs([exp.experiment_id], "tags.kind = 'model'")
+    assert len(children) == 4
+    child = children[0]
+    dataset = child.inputs.dataset_inputs[0].dataset
+    assert exp.tags["mlflow.experimentKind"] == "custom_model_development"
+
+    port = localserv.free_port()
+    url = f"http://{localserv.LOOPBACK}:{port}"
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    cmd = localserv.mlflow_ui_command(sys.executable, f"sqlite:///{tmp_path}/mlflow.db", port)
+    with localserv.running(cmd, log=tmp_path / "ui.log", url=f"{url}/health", timeout=90,
+                           cwd=tmp_path) as server:
+        pgid = server.pid
+        with sync_api.sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=_chromium(), headless=True,
+                                         args=["--no-sandbox", "--disable-gpu"])
+            try:
+                page = browser.new_page(viewport={"width": 1600, "height": 1000})
+                # the link `make ui` prints: the experiment's runs table (MLflow 3.17's UI
+                # picks GenAI vs model-training pages from its workflowType switch)
+                page.goto(f"{url}/#/experiments/{exp.experiment_id}"
+                          "?workflowType=machine_learning")
+                page.get_by_text("pipeline", exact=True).first.wait_for(timeout=90_000)
+                assert "/runs" in page.url
+                assert page.get_by_text("matching runs").count() >= 1
+                close = page.get_by_role("button", name="Close")
+                if close.count():  # the assistant side panel hides half of the table
+                    close.first.click()
+                # expand the pipeline's parent run: its model runs, each with its dataset
+                page.locator('[data-component-id*="runnamecellrenderer"]').first.click()
+                for run in children:
+                    page.get_by_text(run.info.run_name, exact=True).first.wait_for(
+                        timeout=60_000)
+                page.get_by_text(dataset.name).first.wait_for(timeout=30_000)
+                page.screenshot(path=str(SHOTS / "runs_table.png"))
+                # one run's page: its metrics, heldout.rmse among them
+                page.goto(f"{url}/#/experiments/{exp.experiment_id}/runs/"
+                          f"{child.info.run_id}?workflowType=machine_learning")
+                page.get_by_placeholder("Search metrics").fill("heldout.")
+                page.get_by_text("heldout.rmse", exact=True).first.wait_for(timeout=60_000)
+                value = f"{child.data.metrics['heldout.rmse']}"[:8]
+                assert page.get_by_text(value).count() >= 1  # its value, as logged
+                page.screenshot(path=str(SHOTS / "run_page.png"), full_page=True)
+            finally:
+                browser.close()
+    assert localserv.group_alive(pgid) == []  # the UI and its workers are gone
+    assert (SHOTS / "runs_table.png").stat().st_size > 10_000
+    assert (SHOTS / "run_page.png").stat().st_size > 10_000
