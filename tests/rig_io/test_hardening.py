@@ -365,3 +365,26 @@ def test_bag_with_repeated_load_stamps_is_rejected_before_merging(tmp_path: Path
         read_bag(bag)
     assert info.value.file is not None and info.value.file.startswith(str(bag))
     assert info.value.t_ns == 0
+
+
+@pytest.mark.parametrize(("override", "key"), [
+    ({"run_id": "../{stem}"}, "run_id"), ({"rig": "a/b"}, "rig"),
+    ({"excitation": {"kind": "zigzag"}}, "excitation.kind"),
+])
+def test_importer_manifests_meet_the_schema(tmp_path: Path, override: dict[str, Any],
+                                            key: str) -> None:
+    from rig_io.importer import load_mapping
+    from rig_io.sources import Source, load
+
+    mapping = load_mapping(Path(__file__).resolve().parents[2] / "conf" / "importer"
+                           / "tendon_catheter.yaml")
+    log = tmp_path / "data_1_1.txt"
+    log.write_text("Time,Tendon Disp.,Motor Curr.,Pos x,Pos y,Pos z,Angle x,Angle y,Angle z\n"
+                   + "".join(f"{i * 0.002:.6f},{np.sin(i / 50):.5f},60,0,0,0,"
+                             f"{30 + 10 * np.sin(i / 50):.4f},0,0\n" for i in range(200)))
+    src = Source("import", log, (log,))
+    assert load(src, mapping=mapping).run_id == "catheter_data_1_1"
+    mapping = {**mapping, **override, "files": []}
+    with pytest.raises(RigIOError) as info:
+        load(src, mapping=mapping)
+    assert info.value.key == key and info.value.file == str(log)
