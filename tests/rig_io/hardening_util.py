@@ -5,7 +5,11 @@ from __future__ import annotations
 
 import gzip
 import shutil
+import signal
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from types import FrameType
 
 import numpy as np
 import pandas as pd
@@ -43,8 +47,29 @@ def bag_source(bag: Path) -> Source:
     return Source("rosbag1", bag, (bag,))
 
 
+@contextmanager
+def no_hang(seconds: float = 30.0) -> Iterator[None]:
+    """Fail (``TimeoutError``, not a ``RigIOError``) if the block runs longer than ``seconds``."""
+    def alarm(signum: int, frame: FrameType | None) -> None:
+        raise TimeoutError(f"still running after {seconds} s: a hang")
+
+    old = signal.signal(signal.SIGALRM, alarm)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
 def ingest_one(source: Source, *, limits: ReadLimits | None = None) -> pd.DataFrame:
-    """Load and process one source as ingest does; the dataset rows (validated)."""
+    """Load and process one source as ingest does; the dataset rows (validated). Any run
+    longer than 30 s fails the test as a hang."""
+    with no_hang():
+        return _ingest_one(source, limits=limits)
+
+
+def _ingest_one(source: Source, *, limits: ReadLimits | None) -> pd.DataFrame:
     phys = load(source, limits=limits or ReadLimits())
     frame, info = process_run(phys)
     validate(frame, where="write", run=phys.run_id)
