@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from rig_io.checks import MAX_ABS_POSITION
+from rig_io.dataset import run_file
 from rig_io.errors import RigIOError
 from rig_io.limits import ReadLimits
 from rig_io.manifest import is_safe_identifier
@@ -80,6 +81,8 @@ def _ingest_one(source: Source, *, limits: ReadLimits | None) -> pd.DataFrame:
     frame, info = process_run(phys)
     validate(frame, where="write", run=phys.run_id)
     assert is_safe_identifier(info["run_id"]) and is_safe_identifier(info["rig"])
+    out = Path("/nonexistent/out")
+    assert run_file(out, info["run_id"]).resolve().parent == (out / "samples").resolve()
     return frame
 
 

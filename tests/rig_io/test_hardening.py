@@ -189,6 +189,15 @@ def test_bad_cells_rejected_naming_row_and_column(tmp_path: Path, stream: str, c
     assert err.row == 5 and err.key == col, str(err)
 
 
+def test_boolean_column_rejected(tmp_path: Path) -> None:
+    folder = plain_copy(tmp_path)
+    lines = (folder / "camera.csv").read_text().rstrip("\n").split("\n")
+    rows = [",".join([*line.split(",")[:3], "True"]) for line in lines[1:]]
+    (folder / "camera.csv").write_text("\n".join([lines[0], *rows]) + "\n")
+    err = _reject(folder)
+    assert err.key == "confidence" and err.row == 2
+
+
 def test_one_row_loadcell_rejected(tmp_path: Path) -> None:
     folder = plain_copy(tmp_path)
     lines = (folder / "loadcell.csv").read_text().split("\n")
