@@ -102,7 +102,8 @@ def assert_sound(frame: pd.DataFrame) -> None:
 #: Rejects about a whole file (its size, its kind, a corrupt container): no key or row applies.
 WHOLE_FILE = ("file is ", "decompresses to more than", "bag is ", "is a ", "symlink ",
               "truncated or corrupt bag", "unreadable or truncated gzip", "corrupt bag content",
-              "not valid UTF-8", "NUL byte")
+              "not valid UTF-8", "NUL byte", "manifest is nested", "manifest is not a JSON",
+              "missing manifest", "missing required encoder")
 
 
 def assert_names_where(err: RigIOError, *, whole_file_ok: tuple[str, ...] = WHOLE_FILE) -> None:

@@ -397,3 +397,16 @@ def test_importer_manifests_meet_the_schema(tmp_path: Path, override: dict[str, 
     with pytest.raises(RigIOError) as info:
         load(src, mapping=mapping)
     assert info.value.key == key and info.value.file == str(log)
+
+
+def test_deeply_nested_manifest_rejected(tmp_path: Path) -> None:
+    folder = plain_copy(tmp_path)
+    deep: dict[str, Any] = {}
+    cur = deep
+    for _ in range(60):
+        cur["x"] = {}
+        cur = cur["x"]
+    _set(folder, "notes_extra", deep)
+    assert "nested more than 50" in str(_reject(folder))
+    (folder / "manifest.json").write_text("[" * 100_000 + "]" * 100_000)
+    assert "manifest" in str(_reject(folder))
