@@ -63,8 +63,16 @@ def discover(root: str | os.PathLike[str], *,
              mapping: dict[str, Any] | None = None) -> list[Source]:
     """All raw runs under ``root`` (sorted by path)."""
     root = Path(root)
+    if root.is_file() and root.suffix == ".bag":
+        raise RigIOError("source is a single bag file; give the folder that holds the runs",
+                         file=str(root))
     if not root.is_dir():
         raise RigIOError("source folder does not exist", file=str(root))
+    # A run folder given as the source would be searched for runs inside it and give none.
+    if (root / "metadata.yaml").exists() or _looks_like_run_folder(root):
+        raise RigIOError("source is itself a run (it holds manifest.json, stream files or "
+                         "metadata.yaml); give the folder that holds the runs",
+                         file=str(root))
     found: list[Source] = []
     seen: set[Path] = set()
 

@@ -410,3 +410,12 @@ def test_deeply_nested_manifest_rejected(tmp_path: Path) -> None:
     assert "nested more than 50" in str(_reject(folder))
     (folder / "manifest.json").write_text("[" * 100_000 + "]" * 100_000)
     assert "manifest" in str(_reject(folder))
+
+
+def test_a_single_run_as_source_is_refused(tmp_path: Path) -> None:
+    folder = plain_copy(tmp_path / "src")
+    with pytest.raises(RigIOError, match="source is itself a run"):
+        discover(folder)
+    with pytest.raises(RigIOError, match="single bag file"):
+        discover(SAMPLE_BAG)
+    assert [s.path for s in discover(tmp_path / "src")] == [folder]
