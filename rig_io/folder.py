@@ -333,6 +333,9 @@ def _typed(frame: pd.DataFrame, name: str, *, run: str, file: str) -> pd.DataFra
             out[col] = values.to_numpy(dtype=object)
             continue
         empty = raw.isna().to_numpy()
+        if raw.dtype == bool:  # a column of True/False: words, not numbers
+            raise RigIOError(f"non-numeric value {short(raw.iloc[0])} in column {col}",
+                             run=run, file=file, row=checks.FIRST_DATA_LINE, key=col)
         exact_int = raw.dtype == np.int64
         if raw.dtype == np.uint64:  # only values beyond int64 make pandas choose uint64
             num = raw.to_numpy(dtype=float)

@@ -184,12 +184,15 @@ def parse_manifest(text: str, *, run: str | None, file: str) -> dict[str, Any]:
     return manifest
 
 
+_TOO_DEEP = object()
+
+
 def _non_finite(value: Any, path: str, depth: int = 0) -> tuple[str, Any] | None:
     """The first NaN/Infinity anywhere in the manifest (JSON has neither; Python accepts them)."""
     if isinstance(value, float) and not math.isfinite(value):
         return path, value
     if depth > 50:
-        return path, "<nested too deeply>"
+        return path, _TOO_DEEP
     if isinstance(value, dict):
         for k, v in value.items():
             hit = _non_finite(v, f"{path}.{k}" if path else str(k), depth + 1)
@@ -242,6 +245,9 @@ def validate_manifest(manifest: dict[str, Any], *, file: str,
         raise RigIOError(f"unknown format {short(fmt)} (expected {FORMAT!r})", run=run_s,
                          file=file, key="format")
     hit = _non_finite(manifest, "")
+    if hit is not None and hit[1] is _TOO_DEEP:
+        raise RigIOError("manifest is nested more than 50 levels deep", run=run_s, file=file,
+                         key=hit[0][:60])
     if hit is not None:
         raise RigIOError(f"{hit[0]} is {hit[1]!r}: manifest values must be finite numbers",
                          run=run_s, file=file, key=hit[0])

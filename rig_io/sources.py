@@ -22,7 +22,7 @@ from rig_io.errors import RigIOError, short
 from rig_io.folder import MANIFEST, STREAMS, find_stream, read_run_folder
 from rig_io.importer import import_file, matches
 from rig_io.limits import DEFAULT_LIMITS, ReadLimits, check_regular
-from rig_io.manifest import is_safe_identifier
+from rig_io.manifest import check_manifest, is_safe_identifier
 
 SourceKind = Literal["folder", "rosbag1", "rosbag2", "import"]
 
@@ -63,8 +63,16 @@ def discover(root: str | os.PathLike[str], *,
              mapping: dict[str, Any] | None = None) -> list[Source]:
     """All raw runs under ``root`` (sorted by path)."""
     root = Path(root)
+    if root.is_file() and root.suffix == ".bag":
+        raise RigIOError("source is a single bag file; give the folder that holds the runs",
+                         file=str(root))
     if not root.is_dir():
         raise RigIOError("source folder does not exist", file=str(root))
+    # A run folder given as the source would be searched for runs inside it and give none.
+    if (root / "metadata.yaml").exists() or _looks_like_run_folder(root):
+        raise RigIOError("source is itself a run (it holds manifest.json, stream files or "
+                         "metadata.yaml); give the folder that holds the runs",
+                         file=str(root))
     found: list[Source] = []
     seen: set[Path] = set()
 
@@ -174,5 +182,9 @@ def _load(source: Source, *, mapping: dict[str, Any] | None,
             raise RigIOError(f"file is {st.st_size / 2**20:.1f} MB, beyond the limit of "
                              f"{limits.max_file_mb:g} MB (limits.max_file_mb)",
                              run=_hint(source), file=str(source.path))
-        return import_file(mapping, source.path)
+        phys = import_file(mapping, source.path)
+        # The mapping wrote this manifest: it meets the same schema as a rig's.
+        check_manifest(phys.manifest, file=str(source.path), streams=(), si_units=True,
+                       run_hint=_hint(source))
+        return phys
     raise RigIOError(f"unknown source kind {source.kind!r}", file=str(source.path))

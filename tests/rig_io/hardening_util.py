@@ -5,12 +5,18 @@ from __future__ import annotations
 
 import gzip
 import shutil
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from types import FrameType
 
 import numpy as np
 import pandas as pd
 
 from rig_io.checks import MAX_ABS_POSITION
+from rig_io.dataset import run_file
 from rig_io.errors import RigIOError
 from rig_io.limits import ReadLimits
 from rig_io.manifest import is_safe_identifier
@@ -43,12 +49,40 @@ def bag_source(bag: Path) -> Source:
     return Source("rosbag1", bag, (bag,))
 
 
+@contextmanager
+def no_hang(seconds: float = 30.0) -> Iterator[None]:
+    """Fail (``TimeoutError``, not a ``RigIOError``) if the block runs longer than ``seconds``
+    (in the main thread; callers in another thread time out with a join instead)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def alarm(signum: int, frame: FrameType | None) -> None:
+        raise TimeoutError(f"still running after {seconds} s: a hang")
+
+    old = signal.signal(signal.SIGALRM, alarm)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
 def ingest_one(source: Source, *, limits: ReadLimits | None = None) -> pd.DataFrame:
-    """Load and process one source as ingest does; the dataset rows (validated)."""
+    """Load and process one source as ingest does; the dataset rows (validated). Any run
+    longer than 30 s fails the test as a hang."""
+    with no_hang():
+        return _ingest_one(source, limits=limits)
+
+
+def _ingest_one(source: Source, *, limits: ReadLimits | None) -> pd.DataFrame:
     phys = load(source, limits=limits or ReadLimits())
     frame, info = process_run(phys)
     validate(frame, where="write", run=phys.run_id)
     assert is_safe_identifier(info["run_id"]) and is_safe_identifier(info["rig"])
+    out = Path("/nonexistent/out")
+    assert run_file(out, info["run_id"]).resolve().parent == (out / "samples").resolve()
     return frame
 
 
@@ -68,7 +102,8 @@ def assert_sound(frame: pd.DataFrame) -> None:
 #: Rejects about a whole file (its size, its kind, a corrupt container): no key or row applies.
 WHOLE_FILE = ("file is ", "decompresses to more than", "bag is ", "is a ", "symlink ",
               "truncated or corrupt bag", "unreadable or truncated gzip", "corrupt bag content",
-              "not valid UTF-8", "NUL byte")
+              "not valid UTF-8", "NUL byte", "manifest is nested", "manifest is not a JSON",
+              "missing manifest", "missing required encoder")
 
 
 def assert_names_where(err: RigIOError, *, whole_file_ok: tuple[str, ...] = WHOLE_FILE) -> None:

@@ -189,6 +189,15 @@ def test_bad_cells_rejected_naming_row_and_column(tmp_path: Path, stream: str, c
     assert err.row == 5 and err.key == col, str(err)
 
 
+def test_boolean_column_rejected(tmp_path: Path) -> None:
+    folder = plain_copy(tmp_path)
+    lines = (folder / "camera.csv").read_text().rstrip("\n").split("\n")
+    rows = [",".join([*line.split(",")[:3], "True"]) for line in lines[1:]]
+    (folder / "camera.csv").write_text("\n".join([lines[0], *rows]) + "\n")
+    err = _reject(folder)
+    assert err.key == "confidence" and err.row == 2
+
+
 def test_one_row_loadcell_rejected(tmp_path: Path) -> None:
     folder = plain_copy(tmp_path)
     lines = (folder / "loadcell.csv").read_text().split("\n")
@@ -365,3 +374,48 @@ def test_bag_with_repeated_load_stamps_is_rejected_before_merging(tmp_path: Path
         read_bag(bag)
     assert info.value.file is not None and info.value.file.startswith(str(bag))
     assert info.value.t_ns == 0
+
+
+@pytest.mark.parametrize(("override", "key"), [
+    ({"run_id": "../{stem}"}, "run_id"), ({"rig": "a/b"}, "rig"),
+    ({"excitation": {"kind": "zigzag"}}, "excitation.kind"),
+])
+def test_importer_manifests_meet_the_schema(tmp_path: Path, override: dict[str, Any],
+                                            key: str) -> None:
+    from rig_io.importer import load_mapping
+    from rig_io.sources import Source, load
+
+    mapping = load_mapping(Path(__file__).resolve().parents[2] / "conf" / "importer"
+                           / "tendon_catheter.yaml")
+    log = tmp_path / "data_1_1.txt"
+    log.write_text("Time,Tendon Disp.,Motor Curr.,Pos x,Pos y,Pos z,Angle x,Angle y,Angle z\n"
+                   + "".join(f"{i * 0.002:.6f},{np.sin(i / 50):.5f},60,0,0,0,"
+                             f"{30 + 10 * np.sin(i / 50):.4f},0,0\n" for i in range(200)))
+    src = Source("import", log, (log,))
+    assert load(src, mapping=mapping).run_id == "catheter_data_1_1"
+    mapping = {**mapping, **override, "files": []}
+    with pytest.raises(RigIOError) as info:
+        load(src, mapping=mapping)
+    assert info.value.key == key and info.value.file == str(log)
+
+
+def test_deeply_nested_manifest_rejected(tmp_path: Path) -> None:
+    folder = plain_copy(tmp_path)
+    deep: dict[str, Any] = {}
+    cur = deep
+    for _ in range(60):
+        cur["x"] = {}
+        cur = cur["x"]
+    _set(folder, "notes_extra", deep)
+    assert "nested more than 50" in str(_reject(folder))
+    (folder / "manifest.json").write_text("[" * 100_000 + "]" * 100_000)
+    assert "manifest" in str(_reject(folder))
+
+
+def test_a_single_run_as_source_is_refused(tmp_path: Path) -> None:
+    folder = plain_copy(tmp_path / "src")
+    with pytest.raises(RigIOError, match="source is itself a run"):
+        discover(folder)
+    with pytest.raises(RigIOError, match="single bag file"):
+        discover(SAMPLE_BAG)
+    assert [s.path for s in discover(tmp_path / "src")] == [folder]
