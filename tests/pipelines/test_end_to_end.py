@@ -54,7 +54,10 @@ def test_small_pipeline_end_to_end_and_incremental_rerun(tmp_path: Path) -> None
     assert len(general) == 2 * 4 and (general["configurations"] == 2).all()
     assert "Held-out / in-sample rmse" in md
     timing = json.loads((reports / "pipeline_timing.json").read_text())
-    assert {"generate", "ingest", "fit", "validate", "report", "tracking", "total"} <= set(timing)
+    assert {"generate", "ingest", "fit", "validate", "unseen_shape", "report", "tracking",
+            "total"} <= set(timing)
+    # two configurations: too few to leave one out (needs 3), so an empty table, no error
+    assert pd.read_parquet(reports / "unseen_shape.parquet").empty
 
     client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
     exp = client.get_experiment_by_name("tsm-hysteresis")
