@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from hysteresis.base import HysteresisError, make_family
+from hysteresis.base import HysteresisError, check_inverse_reach, make_family
 from hysteresis.compensation import (
     CameraModel,
     LoopResult,
@@ -155,6 +155,41 @@ def _stats_row(res: LoopResult, *, skip_s: float = 0.0, **keys: Any) -> dict[str
 
 def _fit_family(name: str, u: np.ndarray, y: np.ndarray, params: Mapping[str, Any]) -> Any:
     return make_family(name, **dict(params)).fit(u, y)
+
+
+def fit_reachable(name: str, u: np.ndarray, y: np.ndarray, params: Mapping[str, Any], *,
+                  label: str) -> tuple[Any, str]:
+    """Fit ``name`` and check that its inverse can reach what it will be asked for.
+
+    A weighted-play fit whose thresholds reach the identification input's span (or whose total
+    weight is <= 0) is refused by :func:`hysteresis.base.check_inverse_reach`; it is then
+    refitted with ``max_threshold`` at 3/4, 1/2, 1/4 of that span (the widest play must still
+    reverse inside the record) until one passes; if none does, the last refusal is raised and
+    nothing is driven with it. Returns ``(model, note)``; ``note`` says what was refused and
+    what was changed ("" when the first fit passed).
+    """
+    span = (float(np.min(u)), float(np.max(u)))
+    model = _fit_family(name, u, y, params)
+    try:
+        check_inverse_reach(model, identified_range=span)
+        return model, ""
+    except HysteresisError as exc:
+        if "max_threshold" not in params:
+            raise
+        note = f"{label}: {exc}"
+    width = span[1] - span[0]
+    log.warning("%s; refitting with narrower plays", note)
+    for frac in (0.75, 0.5, 0.25):
+        top = min(float(params["max_threshold"]), frac * width)
+        model = _fit_family(name, u, y, {**dict(params), "max_threshold": top})
+        try:
+            check_inverse_reach(model, identified_range=span)
+        except HysteresisError:
+            if frac == 0.25:
+                raise
+            continue
+        break
+    return model, f"{note} -> refitted with max_threshold={top:.4g}"
 
 
 def _family_params(cfg: Mapping[str, Any], name: str) -> dict[str, Any]:
@@ -280,7 +315,8 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
             fit_rows.append({"shape": label, "curve_angle_deg": phi, "radius_mm": r,
                              "family": fam, "fit_s": time.perf_counter() - t0,
                              "fit_rmse": float(np.sqrt(np.mean((pred - y_id) ** 2)))})
-        ours_model = _fit_family(str(ours_cfg["family"]), u_id, y_id, ours_cfg.get("params") or {})
+        ours_model, _ = fit_reachable(str(ours_cfg["family"]), u_id, y_id,
+                                      ours_cfg.get("params") or {}, label=f"seed001 {label} ours")
         profiles = dict(cfg["profiles"])
         if depth == "quick":
             profiles = {k: v for k, v in profiles.items() if k in cfg["quick"]["profiles"]}
@@ -304,7 +340,8 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
                                           scheme=fam)
             runs["ours"] = run_inverse_with_error_correction(
                 fresh(rig), yd, ours_model, dt_s=DT_S, stroke=stroke,
-                process_var=float(ours_cfg["process_var"]), meas_var=float(ours_cfg["meas_var"]))
+                process_var=float(ours_cfg["process_var"]), meas_var=float(ours_cfg["meas_var"]),
+                identified_range=(float(np.min(u_id)), float(np.max(u_id))))
             for res in runs.values():
                 rows.append(_stats_row(res, **keys))
             if depth == "full" and art.plots:
@@ -384,8 +421,8 @@ def run_seed002(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
         rec = drive(rig, u_cal)
         y_cam = _camera_estimate(t_cal, rec.column(tracker_key), cam)
         bw = _fit_family("bouc_wen", u_cal, y_cam, dict(cfg.get("bouc_wen_params") or {}))
-        ours_model = _fit_family(str(cfg["ours"]["family"]), u_cal, y_cam,
-                                 cfg["ours"].get("params") or {})
+        ours_model, _ = fit_reachable(str(cfg["ours"]["family"]), u_cal, y_cam,
+                                      cfg["ours"].get("params") or {}, label=f"seed002 {case} ours")
         rest = float(rig.reset().get(tracker_key, 0.0))
         for sig, omega in signals.items():
             yd = with_lead_in(seed002_motion(t, omega_rad_s=omega,
@@ -488,18 +525,21 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
                              **common),  # type: ignore[arg-type]
     }
     # Ours: the Gamma operator identified on the widest segment's whole record (from rest).
-    ours_model = _fit_family(str(cfg["ours"]["family"]), *full[widest],
-                             cfg["ours"].get("params") or {})
+    pull_id, angle_id = full[widest]
+    ours_model, note = fit_reachable(str(cfg["ours"]["family"]), pull_id, angle_id,
+                                     cfg["ours"].get("params") or {}, label="seed000 ours")
     runs["ours"] = run_inverse_with_error_correction(
         fresh(rig), yd, ours_model, camera=cam, stroke=stroke, output_key=angle_key,
         process_var=float(cfg["ours"]["process_var"]), meas_var=float(cfg["ours"]["meas_var"]),
-        v0=float(tr.get("l0", 0.0)))
+        v0=float(tr.get("l0", 0.0)),
+        identified_range=(float(np.min(pull_id)), float(np.max(pull_id))))
     track_rows = []
     for res in runs.values():
         s = res.statistics(skip_s=lead)
         track_rows.append({"scheme": res.scheme, "abs_err": s["mean_abs_error"],
                            "var": s["var_error"], "rmse": s["rmse"],
-                           "command_travel": command_travel(res)})
+                           "command_travel": command_travel(res),
+                           "note": note if res.scheme == "ours" else ""})
     if art.plots:
         art.figure("seed000_tracking", plot_runs("seed 000 eq. 32 tracking", runs))
         import matplotlib.pyplot as plt
