@@ -23,6 +23,7 @@ plots and headline metrics. The physics is reached only through a :class:`RigBac
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import re
@@ -58,6 +59,7 @@ from hysteresis.compensation import (
     sine_profile,
     triangle_profile,
 )
+from hysteresis.shape_aware import ShapeAwareModel
 from rig_io.atomic import atomic_path, write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -283,6 +285,36 @@ def _seed001_configs(cfg: Mapping[str, Any]) -> list[tuple[str, float, float, st
     return out
 
 
+def fit_shape_aware(cfg: Mapping[str, Any], backend: RigBackend, u_id_cmd: np.ndarray, *,
+                    seed: int, progress: bool) -> tuple[ShapeAwareModel, list[str]]:
+    """The shape-aware model of ``seed001.shape_aware``, identified on every training
+    configuration except the compensated shapes (A, B), which it never sees.
+
+    Each training configuration is driven with the identification excitation and fitted
+    through :func:`fit_reachable`; returns the model and the labels it was trained on.
+    """
+    sa_cfg = dict(cfg["shape_aware"])
+    held = {(float(phi), float(r)) for phi, r in dict(cfg["shapes"]).values()}
+    train = [(float(phi), float(r)) for phi in sa_cfg.get("curve_angles_deg",
+                                                          cfg["curve_angles_deg"])
+             for r in sa_cfg.get("radii_mm", cfg["radii_mm"])
+             if (float(phi), float(r)) not in held]
+    models = []
+    for phi, r in _progress(train, "seed001 shape-aware training", progress):
+        rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=phi, radius_mm=r,
+                               effects=dict(cfg.get("effects") or {}) or None, seed=seed,
+                               sensors=None)
+        rec = drive(rig, u_id_cmd)
+        model, _ = fit_reachable(str(sa_cfg["family"]), rec.column(str(cfg["model_input"])),
+                                 rec.column("output"), sa_cfg.get("params") or {},
+                                 label=f"seed001 shape-aware {phi:g}/{r:g}")
+        models.append(model)
+    sa = ShapeAwareModel(base_family=str(sa_cfg["family"]),
+                         family_params=dict(sa_cfg.get("params") or {}),
+                         **dict(sa_cfg.get("estimator") or {})).fit(train, models)
+    return sa, [f"{phi:g}/{r:g}" for phi, r in train]
+
+
 def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, seed: int,
                 progress: bool) -> dict[str, pd.DataFrame]:
     stroke = StrokeLimits(*map(float, cfg["stroke"]))
@@ -295,6 +327,13 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
     timing_rows: list[dict[str, Any]] = []
     fit_rows: list[dict[str, Any]] = []
     configs = _seed001_configs(cfg)
+    sa_cfg = dict(cfg.get("shape_aware") or {})
+    shape_aware = None
+    if sa_cfg.get("enabled", False):
+        shape_aware, trained_on = fit_shape_aware(cfg, backend, u_id_cmd, seed=seed,
+                                                  progress=progress)
+        log.info("seed001: shape-aware %s trained on %d configurations (%s)",
+                 sa_cfg["family"], len(trained_on), ", ".join(trained_on))
     for label, phi, r, depth in _progress(configs, "seed001 configurations", progress):
         rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=phi, radius_mm=r,
                                effects=dict(cfg.get("effects") or {}) or None, seed=seed,
@@ -342,6 +381,19 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
                 fresh(rig), yd, ours_model, dt_s=DT_S, stroke=stroke,
                 process_var=float(ours_cfg["process_var"]), meas_var=float(ours_cfg["meas_var"]),
                 identified_range=(float(np.min(u_id)), float(np.max(u_id))))
+            if shape_aware is not None and depth == "full":
+                # A model for this shape from the other configurations only (never fitted on it).
+                unseen = shape_aware.model_for(phi, r)
+                id_range = (float(np.min(u_id_cmd)), float(np.max(u_id_cmd)))
+                check_inverse_reach(unseen, identified_range=id_range, desired=yd)
+                runs["shape_aware_ff"] = run_open_loop(
+                    fresh(rig), unseen.invert(yd), desired=yd, dt_s=DT_S, stroke=stroke,
+                    scheme="shape_aware_ff")
+                res = run_inverse_with_error_correction(
+                    fresh(rig), yd, unseen, dt_s=DT_S, stroke=stroke,
+                    process_var=float(ours_cfg["process_var"]),
+                    meas_var=float(ours_cfg["meas_var"]), identified_range=id_range)
+                runs["shape_aware"] = dataclasses.replace(res, scheme="shape_aware")
             for res in runs.values():
                 rows.append(_stats_row(res, **keys))
             if depth == "full" and art.plots:
@@ -588,6 +640,20 @@ def table42_wide(t42: pd.DataFrame, shapes: Iterable[str], schemes: Iterable[str
     return pd.DataFrame(out)
 
 
+def _shape_aware_table(t42: pd.DataFrame, shapes: Iterable[str]) -> pd.DataFrame:
+    """Per shape and profile: RMSE without compensation, with the own-shape schemes and with
+    the shape-aware ones, and the shape-aware reductions (percent)."""
+    sub = t42[t42["shape"].isin(list(shapes))]
+    piv = sub.pivot_table(index=["shape", "profile"], columns="scheme", values="rmse")
+    cols = [c for c in ("none", "gamma", "ours", "shape_aware_ff", "shape_aware") if c in piv]
+    out = piv[cols].reset_index()
+    for c in ("shape_aware_ff", "shape_aware"):
+        if c in piv:
+            out[f"{c}_reduction_pct"] = [reduction(a, b) for a, b in
+                                         zip(out["none"], out[c], strict=True)]
+    return out
+
+
 def headline(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any]) -> dict[str, float]:
     """Reductions (percent) the issue's targets are stated in."""
     m: dict[str, float] = {}
@@ -596,7 +662,7 @@ def headline(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any]) -> dict
         paper = str(cfg["seed001"]["paper_family"])
         for (shape, prof), g in t42.groupby(["shape", "profile"]):
             base = g[g["scheme"] == "none"]
-            for scheme in (paper, "ours"):
+            for scheme in (paper, "ours", "shape_aware_ff", "shape_aware"):
                 hit = g[g["scheme"] == scheme]
                 if len(base) and len(hit):
                     m[f"seed001.{shape}.{prof}.{scheme}.std_reduction_pct"] = reduction(
@@ -648,6 +714,15 @@ def write_report(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any], pat
                   "*mean* square; `sqrt(SSE)` is what the thesis' column labelled RMSE holds "
                   "(it equals sqrt(N) x RMS for its 30/80/20 s records).", "",
                   _md(table42_wide(t42, shapes, ["none", str(s1["paper_family"]), "ours"])), ""]
+        if "shape_aware" in set(t42["scheme"]):
+            sa = dict(s1["shape_aware"])
+            parts += ["### Shapes A and B compensated by a model that never saw them", "",
+                      f"`shape_aware`: the {sa['family']} family's parameters regressed on wrap "
+                      "angle and curvature over the other configurations' fits "
+                      "(`hysteresis.shape_aware`, `docs/unseen-shape.md`), asked for shapes A "
+                      "and B; `shape_aware_ff` plays its inverse open loop, `shape_aware` adds "
+                      "the online model-error estimate of `ours`. RMSE (mm) and reduction:", "",
+                      _md(_shape_aware_table(t42, shapes)), ""]
         allfam = t42[t42["shape"].isin(shapes)].pivot_table(
             index=["shape", "profile"], columns="scheme", values="rmse").reset_index()
         parts += ["RMSE (mm) of every family's inverse, shapes A and B:", "", _md(allfam), ""]

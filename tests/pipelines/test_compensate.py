@@ -93,6 +93,9 @@ def test_quick_run_writes_every_table_report_and_plot(tmp_path: Path) -> None:
     for (_, _), g in t42.groupby(["shape", "profile"]):
         by = g.set_index("scheme")["rmse"]
         assert by["ours"] < 0.1 * by["none"]
+        # a model that never saw shapes A and B (trained on 15-75 deg) compensates them too
+        assert by["shape_aware"] < 0.15 * by["none"]
+        assert by["shape_aware_ff"] < 0.5 * by["none"]
     wide = table42_wide(t42, ["A", "B"], ["none", "gamma", "ours"])
     assert list(wide.columns[:2]) == ["type", "statistic"] and len(wide) == 3 * 5
     t44 = tables["seed001_table44"]
@@ -108,7 +111,8 @@ def test_quick_run_writes_every_table_report_and_plot(tmp_path: Path) -> None:
     est = tables["seed000_estimation"]
     assert (est["abs_err_ratio"] < 0.3).all()  # the UKF removes > 70 % of the model error
     report = (tmp_path / "data" / "reports" / "compensation.md").read_text()
-    for heading in ("Table 4.2", "Table 4.4", "Table I", "Table 5", "Headline numbers"):
+    for heading in ("Table 4.2", "Table 4.4", "Table I", "Table 5", "Headline numbers",
+                    "never saw them"):
         assert heading in report
     assert list((out / "plots").glob("seed001_A_mixed.png"))
     assert not list(out.rglob("*.tmp*"))  # atomic writes leave no temporaries
@@ -159,3 +163,22 @@ def test_quick_seed000_ours_is_not_worse_than_pd_on_the_virtual_rig(tmp_path: Pa
     # refitted narrower, and then it tracks far better than PD (not 4x worse)
     assert "refitted with max_threshold" in t5.loc["ours", "note"]
     assert t5.loc["ours", "abs_err"] < 0.5 * t5.loc["pd", "abs_err"]
+
+
+def test_shape_aware_model_is_trained_without_the_compensated_shapes() -> None:
+    cfg = {"rig": "tsm-bench", "shapes": {"A": [90, 30], "B": [60, 60]},
+           "curve_angles_deg": [30, 60, 90], "radii_mm": [30, 60], "model_input": "command",
+           "shape_aware": {"family": "gamma", "params": {"constraint": "free",
+                                                        "fit_offset": True, "max_threshold": 2.0},
+                           "estimator": {"angle_degree": 2, "curvature_degree": 1}}}
+    _, u = stand_in_excitation("sine_decay", amplitudes_mm=[3.0, 1.5], periods_per_amplitude=2,
+                               frequency_hz=0.5)
+    sa, trained = compensate.fit_shape_aware(cfg, BACKEND, u, seed=0, progress=False)
+    assert trained == ["30/30", "30/60", "60/30", "90/60"]
+    assert sa.shapes_.tolist() == [[30, 30], [30, 60], [60, 30], [90, 60]]
+    # the stand-in's backlash grows with the angle: the model for shape A (never driven)
+    # reproduces that rig's response to the identification input closely
+    rig = StandInRig(rig="tsm-bench", curve_angle_deg=90, radius_mm=30)
+    y = compensate.drive(rig, u).column("output")
+    err = sa.predict(u, curve_angle_deg=90.0, radius_mm=30.0) - y
+    assert np.sqrt(np.mean(err**2)) < 0.1 * np.sqrt(np.mean(y**2))
