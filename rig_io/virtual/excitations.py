@@ -29,12 +29,12 @@ _REQUIRED: dict[str, tuple[str, ...]] = {
 #: range) and band-limited random motion (seed 002's non-periodic test). No model is
 #: identified on them, so they show whether a model generalises beyond its record.
 EVALUATION_EXCITATIONS: tuple[dict[str, Any], ...] = (
-    {"kind": "mixed_sine", "duration_s": 40.0, "terms": [
+    {"kind": "mixed_sine", "duration_s": 30.0, "terms": [
         {"amplitude": 3.15, "frequency_hz": 0.125, "phase_rad": 0.0},
         {"amplitude": 0.9, "frequency_hz": 0.1375, "phase_rad": 0.0},
         {"amplitude": -1.8, "frequency_hz": 0.025, "phase_rad": 0.0},
         {"amplitude": 0.45, "frequency_hz": 0.05625, "phase_rad": 0.0}]},
-    {"kind": "band_random", "amplitude_mm": 5.0, "band_hz": [0.03, 0.35], "duration_s": 40.0,
+    {"kind": "band_random", "amplitude_mm": 5.0, "band_hz": [0.03, 0.35], "duration_s": 30.0,
      "seed": 11},
 )
 #: Extra (non-format) parameters some kinds accept.

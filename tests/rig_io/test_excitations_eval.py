@@ -39,7 +39,7 @@ def test_mixed_sine_is_eq_4_11_at_other_amplitudes() -> None:
     ref = sum(a * np.sin(2 * np.pi * f * t) for a, f in zip(amps, freqs, strict=True))
     assert np.max(np.abs(y - ref)) < 1e-12
     # not the identification amplitudes (6, 4.5, 3, 1.5 mm), but inside their +-6 mm range
-    assert 4.0 < np.max(np.abs(y)) < 6.0 and t[-1] == pytest.approx(40.0)
+    assert 4.0 < np.max(np.abs(y)) < 6.0 and t[-1] == pytest.approx(30.0)
 
 
 def test_band_random_is_reproducible_from_rest_and_peaks_at_its_amplitude() -> None:
