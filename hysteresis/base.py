@@ -94,6 +94,53 @@ def check_pair(u: Any, y: Any) -> tuple[FloatArray, FloatArray]:
     return uu, yy
 
 
+def check_inverse_reach(model: Any, *, identified_range: tuple[float, float] | None = None,
+                        desired: Any = None) -> None:
+    """Refuse, before anything is driven, an inverse that cannot reach what it is asked for.
+
+    Applies to weighted-play models (a Gamma family fit: ``weights_``/``thresholds_``; a
+    compensation ``PlayBank``: ``weights``/``plays``); other models pass. Raises
+    :class:`HysteresisError` naming the identification range when
+
+    * the total weight ``sum(Q)`` is <= 0: the outer slope of ``v -> Gamma(v)`` then points
+      the wrong way (or nowhere), so outputs beyond the loop are unreachable and the nearest
+      reachable one drives the plant away from the target;
+    * a threshold reaches the span of the identification input ``identified_range``: that play
+      never reversed inside the record (from rest it does not even move), so its weight is not
+      identified (it only trades against the offset and the other weights) and the inverse
+      relies on it beyond the data.
+    """
+    q = getattr(model, "weights_", getattr(model, "weights", None))
+    p = getattr(model, "thresholds_", getattr(model, "plays", None))
+    if q is None or p is None:
+        return
+    q = np.asarray(q, dtype=np.float64).ravel()
+    p = np.asarray(p, dtype=np.float64).ravel()
+    name = type(model).__name__
+    where = ""
+    if identified_range is not None:
+        lo, hi = (float(v) for v in identified_range)
+        where = f" (identified on inputs {lo:.4g}..{hi:.4g})"
+    asked = ""
+    if desired is not None:
+        yd = np.asarray(desired, dtype=np.float64)
+        if yd.size:
+            asked = f"; demanded outputs {float(np.min(yd)):.4g}..{float(np.max(yd)):.4g}"
+    total = float(q.sum())
+    if not total > 0:
+        raise HysteresisError(
+            f"{name} cannot reach the demanded outputs{where}: its total weight sum(Q) = "
+            f"{total:.4g} <= 0, so its output does not rise with the input beyond the loop"
+            f"{asked}; refit with thresholds inside the identification range or "
+            f"constraint='sum_to_one'")
+    if identified_range is not None and p.size and float(p.max()) >= (hi - lo) * (1 - 1e-9):
+        raise HysteresisError(
+            f"{name} cannot be trusted to reach the demanded outputs{where}: thresholds up to "
+            f"{float(p.max()):.4g} reach the identification range's span {hi - lo:.4g}, so "
+            f"the widest plays never reversed inside it and their weights are not identified"
+            f"{asked}; refit with max_threshold < {hi - lo:.4g}")
+
+
 class HysteresisModel:
     """Base class. Subclasses implement ``fit``, ``predict`` and (where they can) ``invert``."""
 

@@ -36,7 +36,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import optimize
 
-from hysteresis.base import HysteresisError, as_1d
+from hysteresis.base import HysteresisError, as_1d, check_inverse_reach
 from hysteresis.metrics import error_statistics
 
 FloatArray = npt.NDArray[np.float64]
@@ -389,6 +389,7 @@ def gamma_inverse(
     yd = as_1d(desired, "desired")
     if max_steps is not None:
         yd = yd[:max_steps]
+    check_inverse_reach(bank, desired=yd)
     lim = stroke or StrokeLimits()
     pmax = float(np.max(bank.plays))
     slope = max(abs(float(bank.weights.sum())), 1e-6)
@@ -837,6 +838,7 @@ def run_inverse_with_error_correction(
     camera: CameraModel | None = None, process_var: float = 1e-3, meas_var: float = 1e-2,
     output_key: str = "output", stroke: StrokeLimits | None = None, v0: float = 0.0,
     correct: bool = True, max_step: float | None = None,
+    identified_range: tuple[float, float] | None = None,
 ) -> LoopResult:
     """Our compensator: ``u_k = M^{-1}(desired_k - f_hat)`` with a model's exact step inverse
     (``model``: a :class:`PlayBank` - the Gamma operator - or any stepper/step-able family).
@@ -847,9 +849,15 @@ def run_inverse_with_error_correction(
     loop: the correction is open loop on the estimate, like seed 000's enhancement, and cannot
     destabilise the plant). ``correct=False`` is the plain exact-inverse feed-forward.
     ``max_step`` bounds the command change per tick (default: unbounded but within the stroke).
+    ``identified_range``: the model's identification input range; with it (and always for
+    the total weight) :func:`hysteresis.base.check_inverse_reach` refuses a weighted-play model
+    that cannot reach the targets before anything is driven.
     """
     _check_dt(dt_s)
     yd = as_1d(desired, "desired")
+    # Before the first command: a model that cannot reach the targets is refused, not driven.
+    check_inverse_reach(getattr(model, "bank", getattr(model, "model", model)),
+                        identified_range=identified_range, desired=yd)
     lim = stroke or StrokeLimits()
     cam = _Camera(camera or CameraModel(rate_hz=None), dt_s)
     stepper = as_stepper(model)

@@ -33,6 +33,7 @@ from hysteresis.base import (
     HysteresisError,
     StatefulModel,
     as_1d,
+    check_inverse_reach,
     check_pair,
     register_family,
 )
@@ -253,6 +254,7 @@ class GammaModel(StatefulModel):
         """Inverse input sequence (state carried); ``return_state``: also the end state."""
         self.check_fitted()
         yd = as_1d(y_desired, "y_desired")
+        check_inverse_reach(self, desired=yd)
         st = self._state(state)
         meth = method or self.inverse_method
         if meth == "exact":

@@ -23,6 +23,7 @@ plots and headline metrics. The physics is reached only through a :class:`RigBac
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import re
@@ -35,7 +36,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from hysteresis.base import HysteresisError, make_family
+from hysteresis.base import HysteresisError, check_inverse_reach, make_family
 from hysteresis.compensation import (
     CameraModel,
     LoopResult,
@@ -58,6 +59,7 @@ from hysteresis.compensation import (
     sine_profile,
     triangle_profile,
 )
+from hysteresis.shape_aware import ShapeAwareModel
 from rig_io.atomic import atomic_path, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -167,6 +169,41 @@ def _registry_model(ours_cfg: Mapping[str, Any], rig: str, phi: float, r: float)
                                   alias=str(ours_cfg.get("registry_alias", registry.ALIAS)))
 
 
+def fit_reachable(name: str, u: np.ndarray, y: np.ndarray, params: Mapping[str, Any], *,
+                  label: str) -> tuple[Any, str]:
+    """Fit ``name`` and check that its inverse can reach what it will be asked for.
+
+    A weighted-play fit whose thresholds reach the identification input's span (or whose total
+    weight is <= 0) is refused by :func:`hysteresis.base.check_inverse_reach`; it is then
+    refitted with ``max_threshold`` at 3/4, 1/2, 1/4 of that span (the widest play must still
+    reverse inside the record) until one passes; if none does, the last refusal is raised and
+    nothing is driven with it. Returns ``(model, note)``; ``note`` says what was refused and
+    what was changed ("" when the first fit passed).
+    """
+    span = (float(np.min(u)), float(np.max(u)))
+    model = _fit_family(name, u, y, params)
+    try:
+        check_inverse_reach(model, identified_range=span)
+        return model, ""
+    except HysteresisError as exc:
+        if "max_threshold" not in params:
+            raise
+        note = f"{label}: {exc}"
+    width = span[1] - span[0]
+    log.warning("%s; refitting with narrower plays", note)
+    for frac in (0.75, 0.5, 0.25):
+        top = min(float(params["max_threshold"]), frac * width)
+        model = _fit_family(name, u, y, {**dict(params), "max_threshold": top})
+        try:
+            check_inverse_reach(model, identified_range=span)
+        except HysteresisError:
+            if frac == 0.25:
+                raise
+            continue
+        break
+    return model, f"{note} -> refitted with max_threshold={top:.4g}"
+
+
 def _family_params(cfg: Mapping[str, Any], name: str) -> dict[str, Any]:
     return dict((cfg.get("family_params") or {}).get(name) or {})
 
@@ -258,6 +295,36 @@ def _seed001_configs(cfg: Mapping[str, Any]) -> list[tuple[str, float, float, st
     return out
 
 
+def fit_shape_aware(cfg: Mapping[str, Any], backend: RigBackend, u_id_cmd: np.ndarray, *,
+                    seed: int, progress: bool) -> tuple[ShapeAwareModel, list[str]]:
+    """The shape-aware model of ``seed001.shape_aware``, identified on every training
+    configuration except the compensated shapes (A, B), which it never sees.
+
+    Each training configuration is driven with the identification excitation and fitted
+    through :func:`fit_reachable`; returns the model and the labels it was trained on.
+    """
+    sa_cfg = dict(cfg["shape_aware"])
+    held = {(float(phi), float(r)) for phi, r in dict(cfg["shapes"]).values()}
+    train = [(float(phi), float(r)) for phi in sa_cfg.get("curve_angles_deg",
+                                                          cfg["curve_angles_deg"])
+             for r in sa_cfg.get("radii_mm", cfg["radii_mm"])
+             if (float(phi), float(r)) not in held]
+    models = []
+    for phi, r in _progress(train, "seed001 shape-aware training", progress):
+        rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=phi, radius_mm=r,
+                               effects=dict(cfg.get("effects") or {}) or None, seed=seed,
+                               sensors=None)
+        rec = drive(rig, u_id_cmd)
+        model, _ = fit_reachable(str(sa_cfg["family"]), rec.column(str(cfg["model_input"])),
+                                 rec.column("output"), sa_cfg.get("params") or {},
+                                 label=f"seed001 shape-aware {phi:g}/{r:g}")
+        models.append(model)
+    sa = ShapeAwareModel(base_family=str(sa_cfg["family"]),
+                         family_params=dict(sa_cfg.get("params") or {}),
+                         **dict(sa_cfg.get("estimator") or {})).fit(train, models)
+    return sa, [f"{phi:g}/{r:g}" for phi, r in train]
+
+
 def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, seed: int,
                 progress: bool) -> dict[str, pd.DataFrame]:
     stroke = StrokeLimits(*map(float, cfg["stroke"]))
@@ -270,6 +337,13 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
     timing_rows: list[dict[str, Any]] = []
     fit_rows: list[dict[str, Any]] = []
     configs = _seed001_configs(cfg)
+    sa_cfg = dict(cfg.get("shape_aware") or {})
+    shape_aware = None
+    if sa_cfg.get("enabled", False):
+        shape_aware, trained_on = fit_shape_aware(cfg, backend, u_id_cmd, seed=seed,
+                                                  progress=progress)
+        log.info("seed001: shape-aware %s trained on %d configurations (%s)",
+                 sa_cfg["family"], len(trained_on), ", ".join(trained_on))
     for label, phi, r, depth in _progress(configs, "seed001 configurations", progress):
         rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=phi, radius_mm=r,
                                effects=dict(cfg.get("effects") or {}) or None, seed=seed,
@@ -290,10 +364,12 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
             fit_rows.append({"shape": label, "curve_angle_deg": phi, "radius_mm": r,
                              "family": fam, "fit_s": time.perf_counter() - t0,
                              "fit_rmse": float(np.sqrt(np.mean((pred - y_id) ** 2)))})
-        ours_model = (_registry_model(ours_cfg, str(cfg["rig"]), phi, r)
-                      if ours_cfg.get("registry") else
-                      _fit_family(str(ours_cfg["family"]), u_id, y_id,
-                                  ours_cfg.get("params") or {}))
+        if ours_cfg.get("registry"):
+            ours_model = _registry_model(ours_cfg, str(cfg["rig"]), phi, r)
+        else:
+            ours_model, _ = fit_reachable(str(ours_cfg["family"]), u_id, y_id,
+                                          ours_cfg.get("params") or {},
+                                          label=f"seed001 {label} ours")
         profiles = dict(cfg["profiles"])
         if depth == "quick":
             profiles = {k: v for k, v in profiles.items() if k in cfg["quick"]["profiles"]}
@@ -317,7 +393,21 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
                                           scheme=fam)
             runs["ours"] = run_inverse_with_error_correction(
                 fresh(rig), yd, ours_model, dt_s=DT_S, stroke=stroke,
-                process_var=float(ours_cfg["process_var"]), meas_var=float(ours_cfg["meas_var"]))
+                process_var=float(ours_cfg["process_var"]), meas_var=float(ours_cfg["meas_var"]),
+                identified_range=(float(np.min(u_id)), float(np.max(u_id))))
+            if shape_aware is not None and depth == "full":
+                # A model for this shape from the other configurations only (never fitted on it).
+                unseen = shape_aware.model_for(phi, r)
+                id_range = (float(np.min(u_id_cmd)), float(np.max(u_id_cmd)))
+                check_inverse_reach(unseen, identified_range=id_range, desired=yd)
+                runs["shape_aware_ff"] = run_open_loop(
+                    fresh(rig), unseen.invert(yd), desired=yd, dt_s=DT_S, stroke=stroke,
+                    scheme="shape_aware_ff")
+                res = run_inverse_with_error_correction(
+                    fresh(rig), yd, unseen, dt_s=DT_S, stroke=stroke,
+                    process_var=float(ours_cfg["process_var"]),
+                    meas_var=float(ours_cfg["meas_var"]), identified_range=id_range)
+                runs["shape_aware"] = dataclasses.replace(res, scheme="shape_aware")
             for res in runs.values():
                 rows.append(_stats_row(res, **keys))
             if depth == "full" and art.plots:
@@ -397,8 +487,8 @@ def run_seed002(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
         rec = drive(rig, u_cal)
         y_cam = _camera_estimate(t_cal, rec.column(tracker_key), cam)
         bw = _fit_family("bouc_wen", u_cal, y_cam, dict(cfg.get("bouc_wen_params") or {}))
-        ours_model = _fit_family(str(cfg["ours"]["family"]), u_cal, y_cam,
-                                 cfg["ours"].get("params") or {})
+        ours_model, _ = fit_reachable(str(cfg["ours"]["family"]), u_cal, y_cam,
+                                      cfg["ours"].get("params") or {}, label=f"seed002 {case} ours")
         rest = float(rig.reset().get(tracker_key, 0.0))
         for sig, omega in signals.items():
             yd = with_lead_in(seed002_motion(t, omega_rad_s=omega,
@@ -501,18 +591,21 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
                              **common),  # type: ignore[arg-type]
     }
     # Ours: the Gamma operator identified on the widest segment's whole record (from rest).
-    ours_model = _fit_family(str(cfg["ours"]["family"]), *full[widest],
-                             cfg["ours"].get("params") or {})
+    pull_id, angle_id = full[widest]
+    ours_model, note = fit_reachable(str(cfg["ours"]["family"]), pull_id, angle_id,
+                                     cfg["ours"].get("params") or {}, label="seed000 ours")
     runs["ours"] = run_inverse_with_error_correction(
         fresh(rig), yd, ours_model, camera=cam, stroke=stroke, output_key=angle_key,
         process_var=float(cfg["ours"]["process_var"]), meas_var=float(cfg["ours"]["meas_var"]),
-        v0=float(tr.get("l0", 0.0)))
+        v0=float(tr.get("l0", 0.0)),
+        identified_range=(float(np.min(pull_id)), float(np.max(pull_id))))
     track_rows = []
     for res in runs.values():
         s = res.statistics(skip_s=lead)
         track_rows.append({"scheme": res.scheme, "abs_err": s["mean_abs_error"],
                            "var": s["var_error"], "rmse": s["rmse"],
-                           "command_travel": command_travel(res)})
+                           "command_travel": command_travel(res),
+                           "note": note if res.scheme == "ours" else ""})
     if art.plots:
         art.figure("seed000_tracking", plot_runs("seed 000 eq. 32 tracking", runs))
         import matplotlib.pyplot as plt
@@ -561,6 +654,20 @@ def table42_wide(t42: pd.DataFrame, shapes: Iterable[str], schemes: Iterable[str
     return pd.DataFrame(out)
 
 
+def _shape_aware_table(t42: pd.DataFrame, shapes: Iterable[str]) -> pd.DataFrame:
+    """Per shape and profile: RMSE without compensation, with the own-shape schemes and with
+    the shape-aware ones, and the shape-aware reductions (percent)."""
+    sub = t42[t42["shape"].isin(list(shapes))]
+    piv = sub.pivot_table(index=["shape", "profile"], columns="scheme", values="rmse")
+    cols = [c for c in ("none", "gamma", "ours", "shape_aware_ff", "shape_aware") if c in piv]
+    out = piv[cols].reset_index()
+    for c in ("shape_aware_ff", "shape_aware"):
+        if c in piv:
+            out[f"{c}_reduction_pct"] = [reduction(a, b) for a, b in
+                                         zip(out["none"], out[c], strict=True)]
+    return out
+
+
 def headline(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any]) -> dict[str, float]:
     """Reductions (percent) the issue's targets are stated in."""
     m: dict[str, float] = {}
@@ -569,7 +676,7 @@ def headline(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any]) -> dict
         paper = str(cfg["seed001"]["paper_family"])
         for (shape, prof), g in t42.groupby(["shape", "profile"]):
             base = g[g["scheme"] == "none"]
-            for scheme in (paper, "ours"):
+            for scheme in (paper, "ours", "shape_aware_ff", "shape_aware"):
                 hit = g[g["scheme"] == scheme]
                 if len(base) and len(hit):
                     m[f"seed001.{shape}.{prof}.{scheme}.std_reduction_pct"] = reduction(
@@ -621,6 +728,15 @@ def write_report(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any], pat
                   "*mean* square; `sqrt(SSE)` is what the thesis' column labelled RMSE holds "
                   "(it equals sqrt(N) x RMS for its 30/80/20 s records).", "",
                   _md(table42_wide(t42, shapes, ["none", str(s1["paper_family"]), "ours"])), ""]
+        if "shape_aware" in set(t42["scheme"]):
+            sa = dict(s1["shape_aware"])
+            parts += ["### Shapes A and B compensated by a model that never saw them", "",
+                      f"`shape_aware`: the {sa['family']} family's parameters regressed on wrap "
+                      "angle and curvature over the other configurations' fits "
+                      "(`hysteresis.shape_aware`, `docs/unseen-shape.md`), asked for shapes A "
+                      "and B; `shape_aware_ff` plays its inverse open loop, `shape_aware` adds "
+                      "the online model-error estimate of `ours`. RMSE (mm) and reduction:", "",
+                      _md(_shape_aware_table(t42, shapes)), ""]
         allfam = t42[t42["shape"].isin(shapes)].pivot_table(
             index=["shape", "profile"], columns="scheme", values="rmse").reset_index()
         parts += ["RMSE (mm) of every family's inverse, shapes A and B:", "", _md(allfam), ""]

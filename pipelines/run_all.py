@@ -1,4 +1,4 @@
-"""``make pipeline``: generate -> ingest -> fit -> validate -> report, then MLflow.
+"""``make pipeline``: generate -> ingest -> fit -> validate -> unseen_shape -> report, then MLflow.
 
     python -m pipelines.run_all
     python -m pipelines.run_all +experiment=quick
@@ -47,7 +47,7 @@ from rig_io.atomic import write_text_atomic
 
 log = logging.getLogger(__name__)
 EXTERNAL_STAGES = ("generate", "ingest")
-OWN_STAGES = ("fit", "validate", "report")
+OWN_STAGES = ("fit", "validate", "unseen_shape", "report")
 
 
 @dataclass
@@ -55,6 +55,7 @@ class PipelineResult:
     timings: dict[str, float] = field(default_factory=dict)
     fits: pd.DataFrame | None = None
     metrics: pd.DataFrame | None = None
+    unseen_shape: Any = None
     report: Any = None
     parent_run_id: str | None = None
     up_to_date: bool = False
@@ -111,6 +112,13 @@ def stage_config(name: str, pipeline: Mapping[str, Any]) -> dict[str, Any]:
         for key in ("heldout", "cross"):
             if key in pipeline:
                 cfg[key] = pipeline[key]
+    if name == "unseen_shape":
+        cfg["fit_excitation"] = list(pipeline.get("fit_excitations") or ["sine_decay"])[0]
+        for key in ("config", "signals", "n_jobs", "cache"):
+            if key in pipeline:
+                cfg[key] = pipeline[key]
+        if pipeline.get("heldout"):
+            cfg["eval_excitations"] = list(pipeline["heldout"])
     if name == "report":
         cfg["fit_excitation"] = list(pipeline.get("fit_excitations") or ["sine_decay"])[0]
         for key in ("n_jobs", "cache"):
@@ -174,7 +182,7 @@ def run_ingest_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
 
 def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
     """Hydra-free core of ``make pipeline`` (cfg = composed ``conf/pipeline.yaml``)."""
-    from pipelines import fit, report, tracking, validate
+    from pipelines import fit, report, tracking, unseen_shape, validate
 
     paths = Paths.from_config(cfg["paths"])
     paths.root.mkdir(parents=True, exist_ok=True)
@@ -203,7 +211,7 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
         result.timings["ingest"] = time.perf_counter() - t0
 
     dataset = None
-    if any(s in wanted for s in ("fit", "validate")):
+    if any(s in wanted for s in ("fit", "validate", "unseen_shape")):
         t0 = time.perf_counter()
         dataset = read_processed(paths.processed)
         result.timings["read_dataset"] = time.perf_counter() - t0
@@ -217,6 +225,11 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
         result.metrics, _ = validate.run(stage_config("validate", cfg), dataset=dataset,
                                          fits=result.fits)
         result.timings["validate"] = time.perf_counter() - t0
+    if "unseen_shape" in wanted:
+        t0 = time.perf_counter()
+        result.unseen_shape = unseen_shape.run(stage_config("unseen_shape", cfg),
+                                               dataset=dataset, fits=result.fits)
+        result.timings["unseen_shape"] = time.perf_counter() - t0
     # MLflow's child runs are logged in a background thread while the report draws (its
     # figures render in worker processes); the figures are attached to the runs afterwards.
     tracking_state: TrackState | None = None
@@ -322,7 +335,10 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
 def _track_finish(tracker: Any, state: TrackState, result: PipelineResult) -> None:
     """After the report: its files on the parent, each configuration's figures on its runs."""
     from pipelines import report as report_mod
+    from pipelines import unseen_shape
 
+    if result.unseen_shape is not None:
+        unseen_shape.log_result(tracker, state.parent, result.unseen_shape)
     rep = result.report
     if rep is not None and (not state.up_to_date or not rep.cached):
         report_mod.log_report(tracker, state.parent, rep)

@@ -1,4 +1,5 @@
-"""The standard campaign of seed 001 (chapter 3.1.1): 24 configurations x 3 excitations."""
+"""The standard campaign of seed 001 (chapter 3.1.1): 24 configurations x 3 excitations,
+plus the two evaluation-only excitations of :data:`EVALUATION_EXCITATIONS`."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import numpy as np
+
+from rig_io.virtual.excitations import EVALUATION_EXCITATIONS
 
 CURVE_ANGLES_DEG = (15, 30, 45, 60, 75, 90)
 RADII_MM = (30, 45, 60, 75)
@@ -18,6 +21,7 @@ STANDARD_EXCITATIONS: tuple[dict[str, Any], ...] = (
      "slope_mm_s": 6.0},
     {"kind": "trapezoid_decay", "amplitudes_mm": AMPLITUDES_MM, "periods_per_amplitude": 5,
      "slope_mm_s": 6.0, "dwell_s": 0.5},
+    *EVALUATION_EXCITATIONS,
 )
 _START = datetime(2026, 3, 2, 9, 0, tzinfo=UTC)
 

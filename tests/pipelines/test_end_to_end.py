@@ -12,7 +12,8 @@ from mlflow import MlflowClient
 from pipelines.run_all import compose_stage, run_pipeline
 from tests.pipelines.pipeline_data import mlflow_store
 
-SHORT = [f"campaign.excitations.{i}.periods_per_amplitude=2" for i in range(3)]
+SHORT = [*(f"campaign.excitations.{i}.periods_per_amplitude=2" for i in range(3)),
+         *(f"campaign.excitations.{i}.duration_s=10.0" for i in (3, 4))]
 
 
 def _listed(stage: str, overrides: list[str]) -> str:
@@ -30,14 +31,14 @@ def test_small_pipeline_end_to_end_and_incremental_rerun(tmp_path: Path) -> None
         _listed("report", ["plots.dpi=40"]),
     ])
     first = run_pipeline(cfg)
-    assert first.generate_report is not None and len(first.generate_report["written"]) == 6
+    assert first.generate_report is not None and len(first.generate_report["written"]) == 10
     assert first.ingest_report is not None and first.ingest_report["n_rejected"] == 0
     reports = tmp_path / "data" / "reports"
     metrics = pd.read_parquet(reports / "metrics.parquet")
-    # 2 families x 2 configurations x (fit + 2 held-out excitations)
-    assert len(metrics) == 12
+    # 2 families x 2 configurations x (fit + 4 held-out excitations, two evaluation-only)
+    assert len(metrics) == 20
     assert set(metrics["eval_excitation"]) == {"sine_decay", "triangle_decay",
-                                               "trapezoid_decay"}
+                                               "trapezoid_decay", "mixed_sine", "band_random"}
     assert (metrics["sse"] > 0).all() and metrics["rmse"].notna().all()
     # on the virtual rig hysteresis matters: Gamma beats the linear baseline held out, most
     # clearly at the large curve angle
@@ -49,8 +50,14 @@ def test_small_pipeline_end_to_end_and_incremental_rerun(tmp_path: Path) -> None
     assert gamma["weights_sum"].sub(1.0).abs().max() < 1e-9 and (gamma["sse"] > 0).all()
     md = (reports / "report.md").read_text()
     assert "plots/elementary_tsm-bench_phi090_r030.png" in md
+    general = pd.read_csv(reports / "generalisation.csv")
+    assert len(general) == 2 * 4 and (general["configurations"] == 2).all()
+    assert "Held-out / in-sample rmse" in md
     timing = json.loads((reports / "pipeline_timing.json").read_text())
-    assert {"generate", "ingest", "fit", "validate", "report", "tracking", "total"} <= set(timing)
+    assert {"generate", "ingest", "fit", "validate", "unseen_shape", "report", "tracking",
+            "total"} <= set(timing)
+    # two configurations: too few to leave one out (needs 3), so an empty table, no error
+    assert pd.read_parquet(reports / "unseen_shape.parquet").empty
 
     client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
     exp = client.get_experiment_by_name("tsm-hysteresis")

@@ -44,14 +44,14 @@ def test_default_config_is_the_standard_campaign() -> None:
     assert cfg.format == "folder" and cfg.out.endswith("data/raw/virtual")
     assert dict(cfg.effects) == dict.fromkeys(EFFECT_NAMES, 0.0)
     specs = specs_from_config(cfg)
-    assert len(specs) == 72
+    assert len(specs) == 120
     assert [s["run_id"] for s in specs] == [s["run_id"] for s in standard_campaign(0)]
     assert json.dumps(specs)  # plain containers, no OmegaConf nodes
     other = specs_from_config(_compose(["campaign=quick", "effects=drift_only",
                                         "rig=bending_joint", "campaign.seed=3"]))
-    assert len(other) == 6 and all(s["effects"]["drift"] == 1.0 for s in other)
+    assert len(other) == 10 and all(s["effects"]["drift"] == 1.0 for s in other)
     assert all(s["rig"] == "bending-joint" for s in other)
-    assert [s["seed"] for s in other] != [s["seed"] for s in standard_campaign(0)[:6]]
+    assert [s["seed"] for s in other] != [s["seed"] for s in standard_campaign(0)[:10]]
     cath = specs_from_config(_compose(["rig=bending_joint_catheter", "campaign=quick"]))
     assert cath[0]["params"]["section_diameter_mm"] == 6.5
 
@@ -114,9 +114,10 @@ def test_cli(tmp_path: Path) -> None:
            f"out={tmp_path / 'raw'}", f"hydra.run.dir={tmp_path / 'hydra'}"]
     proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
-    assert "3 runs written" in proc.stdout
+    assert "5 runs written" in proc.stdout
     folders = sorted(p.name for p in (tmp_path / "raw").iterdir() if p.is_dir())
-    assert folders == ["phi045_r030_sine_decay_0001", "phi045_r030_trapezoid_decay_0003",
+    assert folders == ["phi045_r030_band_random_0005", "phi045_r030_mixed_sine_0004",
+                       "phi045_r030_sine_decay_0001", "phi045_r030_trapezoid_decay_0003",
                        "phi045_r030_triangle_decay_0002"]
     assert (tmp_path / "raw" / folders[0] / "loadcell.csv.gz").is_file()
     bad = subprocess.run(cmd[:3] + ["format=xml", f"out={tmp_path / 'x'}",

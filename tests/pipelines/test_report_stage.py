@@ -116,3 +116,28 @@ def test_report_without_metrics_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(stages.PipelineError, match="metrics.parquet"):
         report_stage.run(stage_cfg(tmp_path))
     assert json.dumps(stage_cfg(tmp_path))  # plain JSON-able config
+
+
+def test_generalisation_table_is_the_held_out_over_in_sample_ratio() -> None:
+    rows = []
+    for fam, fit_rmse, factor in (("gamma", 0.1, 1.0), ("bouc_wen", 0.2, 1.5)):
+        for i, phi in enumerate((15.0, 45.0, 90.0)):
+            base = {"family": fam, "rig": "tsm-bench", "curve_angle_deg": phi,
+                    "radius_mm": 30.0, "fit_excitation": "sine_decay", "n": 10}
+            scale = 1.0 + i  # the configurations differ; the ratio is per configuration
+            rows.append({**base, "eval_excitation": "sine_decay", "split": "fit",
+                         "rmse": fit_rmse * scale})
+            rows.append({**base, "eval_excitation": "band_random", "split": "heldout",
+                         "rmse": fit_rmse * scale * factor * (1.0 + 0.1 * i)})
+    table = report_stage.generalisation_table(stages.metrics_frame(rows),
+                                              fit_excitation="sine_decay")
+    assert list(table["family"]) == ["bouc_wen", "gamma"]
+    assert (table["eval_excitation"] == "band_random").all()
+    assert (table["configurations"] == 3).all()
+    np.testing.assert_allclose(table["median_ratio"], [1.5 * 1.1, 1.1])
+    np.testing.assert_allclose(table["min_ratio"], [1.5, 1.0])
+    np.testing.assert_allclose(table["max_ratio"], [1.5 * 1.2, 1.2])
+    np.testing.assert_allclose(table["median_fit_rmse"], [0.4, 0.2])
+    empty = report_stage.generalisation_table(stages.metrics_frame(rows),
+                                              fit_excitation="triangle_decay")
+    assert empty.empty and "median_ratio" in empty.columns

@@ -30,15 +30,18 @@ def bench_run():  # type: ignore[no-untyped-def]
                         sensors={"counter_start": "near_wrap", "tracker": True})
 
 
-def test_standard_campaign_is_72_reproducible_specs() -> None:
+def test_standard_campaign_is_120_reproducible_specs() -> None:
     specs = standard_campaign(0)
-    assert len(specs) == 72
+    assert len(specs) == 120
     ids = [s["run_id"] for s in specs]
-    assert len(set(ids)) == 72
-    assert all(re.fullmatch(r"phi\d{3}_r\d{3}_(sine|triangle|trapezoid)_decay_\d{4}", i)
-               for i in ids)
+    assert len(set(ids)) == 120
+    assert all(re.fullmatch(r"phi\d{3}_r\d{3}_((sine|triangle|trapezoid)_decay|mixed_sine|"
+                            r"band_random)_\d{4}", i) for i in ids)
     assert ids[0] == "phi015_r030_sine_decay_0001"
-    assert ids[-1] == "phi090_r075_trapezoid_decay_0072"
+    assert ids[-1] == "phi090_r075_band_random_0120"
+    kinds = [s["excitation"]["kind"] for s in specs[:5]]
+    assert kinds == ["sine_decay", "triangle_decay", "trapezoid_decay", "mixed_sine",
+                     "band_random"]
     configs = {(s["curve_angle_deg"], s["radius_mm"]) for s in specs}
     assert configs == {(p, r) for p in (15, 30, 45, 60, 75, 90) for r in (30, 45, 60, 75)}
     sine = [s for s in specs if s["excitation"]["kind"] == "sine_decay"]
@@ -48,7 +51,7 @@ def test_standard_campaign_is_72_reproducible_specs() -> None:
     assert tri["excitation"]["slope_mm_s"] == 6.0
     assert standard_campaign(0) == specs
     seeds1 = [s["seed"] for s in standard_campaign(1)]
-    assert seeds1 != [s["seed"] for s in specs] and len(set(seeds1)) == 72
+    assert seeds1 != [s["seed"] for s in specs] and len(set(seeds1)) == 120
 
 
 def test_manifest_has_the_formats_shape(bench_run) -> None:  # type: ignore[no-untyped-def]

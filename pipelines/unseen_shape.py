@@ -1,0 +1,350 @@
+"""Stage ``unseen_shape``: can a family predict a sheath shape it was never fitted on?
+
+    python -m pipelines.unseen_shape
+    python -m pipelines.unseen_shape families=[gamma] estimator.method=rbf
+
+Leave-one-configuration-out over every configuration of the rig: for each configuration and
+family, three predictors score the configuration's evaluation runs (``eval_excitations``):
+
+* ``own``: the configuration's own model (identified on its own record: the reference);
+* ``nearest``: the model of the nearest other configuration (scaled wrap angle x curvature);
+* ``shape_aware``: :class:`hysteresis.shape_aware.ShapeAwareModel` fitted on the models of
+  every *other* configuration, asked for this one.
+
+Writes ``${paths.reports}/unseen_shape.parquet`` (columns :data:`COLUMNS`, one row per family x
+configuration x predictor), ``unseen_shape_summary.csv`` (per family: median RMSE of each
+predictor, the shape-aware / own ratio, in how many configurations shape-aware beats nearest,
+whether the targets hold) and ``plots/unseen_shape.png``; reads only the fit stage's model
+files and the processed dataset. Nothing is recomputed when its inputs are unchanged.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import hydra
+import numpy as np
+import pandas as pd
+
+from hysteresis.base import HysteresisModel
+from hysteresis.shape_aware import ShapeAwareModel
+from pipelines import cache, stages
+from pipelines.common import (
+    Paths,
+    dataset_hash,
+    hydra_output_dir,
+    hydra_sweep_dir,
+    read_processed,
+    to_container,
+)
+from pipelines.stages import Configuration, PipelineError, RunSignal
+from rig_io.atomic import atomic_path, write_text_atomic
+
+log = logging.getLogger(__name__)
+COLUMNS = ("family", "curve_angle_deg", "radius_mm", "predictor", "rmse")
+PREDICTORS = ("own", "nearest", "shape_aware")
+KEY_FILE = "unseen_shape_key.json"
+#: The issue's targets for the best family: shape-aware median LOO RMSE at most this times
+#: the own-configuration median, and below the nearest model in this share of configurations.
+RATIO_TARGET = 1.15
+BELOW_NEAREST_SHARE = 20 / 24
+
+
+@dataclass
+class UnseenShapeResult:
+    table: pd.DataFrame
+    summary: pd.DataFrame
+    files: list[Path] = field(default_factory=list)
+    best_family: str | None = None
+    cached: bool = False
+    seconds: float = 0.0
+
+    def mlflow_metrics(self) -> dict[str, float]:
+        """``unseen_shape.<family>.<name>`` for every summary number (MLflow metric keys)."""
+        out: dict[str, float] = {}
+        for row in self.summary.to_dict("records"):
+            for key, value in row.items():
+                if key != "family" and isinstance(value, (int, float, np.number, bool)):
+                    out[f"unseen_shape.{row['family']}.{key}"] = float(value)
+        return out
+
+
+def _rmse(model: HysteresisModel, runs: Sequence[RunSignal]) -> float:
+    errs = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for run in runs:
+            errs.append(run.y - np.asarray(model.predict(run.u), dtype=np.float64))
+    e = np.concatenate(errs)
+    return float(np.sqrt(np.mean(e * e)))
+
+
+def leave_one_out(family: str, configs: Sequence[Configuration],
+                  models: Sequence[HysteresisModel], runs: Mapping[str, Sequence[RunSignal]],
+                  estimator: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Rows (:data:`COLUMNS`) of one family: own, nearest and shape-aware per configuration.
+
+    ``runs`` maps a configuration label to its evaluation runs. A predictor whose model
+    fails to simulate scores NaN (recorded, never raised).
+    """
+    rows: list[dict[str, Any]] = []
+    shapes = [(float(c.curve_angle_deg or 0.0), float(c.radius_mm or 0.0)) for c in configs]
+    for i, config in enumerate(configs):
+        others = [j for j in range(len(configs)) if j != i]
+        sa = ShapeAwareModel(base_family=family, **dict(estimator))
+        sa.fit([shapes[j] for j in others], [models[j] for j in others])
+        phi, r = shapes[i]
+        for name in PREDICTORS:
+            try:
+                value = _rmse(_predictor(name, i, others, models, sa, phi, r), runs[config.label])
+            except Exception as exc:  # noqa: BLE001 - one bad prediction must not stop the rest
+                log.warning("unseen_shape: %s %s %s: %s: %s", family, config.label, name,
+                            type(exc).__name__, exc)
+                value = float("nan")
+            rows.append({"family": family, "curve_angle_deg": phi, "radius_mm": r,
+                         "predictor": name, "rmse": value})
+    return rows
+
+
+def _predictor(name: str, i: int, others: Sequence[int], models: Sequence[HysteresisModel],
+               sa: ShapeAwareModel, phi: float, r: float) -> HysteresisModel:
+    """The model predictor ``name`` offers for configuration ``i`` at shape (phi, r);
+    ``sa`` was fitted without it."""
+    if name == "own":
+        return models[i]
+    if name == "nearest":
+        return models[others[sa.nearest_index(phi, r)]]
+    return sa.model_for(phi, r)
+
+
+def summarise(table: pd.DataFrame) -> pd.DataFrame:
+    """Per family: median RMSE per predictor, shape-aware / own, configurations beating nearest.
+
+    ``meets_targets``: ratio <= :data:`RATIO_TARGET` and shape-aware below nearest in at least
+    :data:`BELOW_NEAREST_SHARE` of the configurations (20 of 24).
+    """
+    cols = ["family", "configurations", "median_own", "median_nearest", "median_shape_aware",
+            "ratio_shape_aware_to_own", "shape_aware_below_nearest", "meets_targets"]
+    if table.empty:
+        return pd.DataFrame(columns=cols)
+    wide = table.pivot_table(index=["family", "curve_angle_deg", "radius_mm"],
+                             columns="predictor", values="rmse", dropna=False).reset_index()
+    rows = []
+    for fam, g in wide.groupby("family", sort=True):
+        n = len(g)
+        med = {p: float(g[p].median()) for p in PREDICTORS}
+        ratio = med["shape_aware"] / med["own"] if med["own"] > 0 else float("nan")
+        below = int((g["shape_aware"] < g["nearest"]).sum())
+        rows.append({"family": fam, "configurations": n, "median_own": med["own"],
+                     "median_nearest": med["nearest"], "median_shape_aware": med["shape_aware"],
+                     "ratio_shape_aware_to_own": ratio, "shape_aware_below_nearest": below,
+                     "meets_targets": bool(ratio <= RATIO_TARGET
+                                           and below >= BELOW_NEAREST_SHARE * n - 1e-9)})
+    return pd.DataFrame(rows, columns=cols)
+
+
+def _family_task(family: str, configs: list[Configuration], model_json: list[str],
+                 runs: dict[str, list[RunSignal]], estimator: dict[str, Any]
+                 ) -> list[dict[str, Any]]:
+    models = [stages.load_model(j) for j in model_json]
+    return leave_one_out(family, configs, models, runs, estimator)
+
+
+def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
+        fits: pd.DataFrame | None = None) -> UnseenShapeResult:
+    """Hydra-free core: config in, :class:`UnseenShapeResult` out; writes under reports/."""
+    from pipelines.fit import load_models
+
+    start = time.perf_counter()
+    paths = Paths.from_config(cfg["paths"])
+    if dataset is None:
+        dataset = read_processed(paths.processed)
+    sig = cfg.get("signals") or {}
+    input_col, output_col = str(sig.get("input", "input")), str(sig.get("output", "output"))
+    stages.check_dataset(dataset, signals=(input_col, output_col))
+    sel = cfg.get("config") or {}
+    configs = stages.configurations(dataset, rig=sel.get("rig"),
+                                    curve_angle_deg=sel.get("curve_angle_deg"),
+                                    radius_mm=sel.get("radius_mm"))
+    configs = [c for c in configs if c.curve_angle_deg is not None and c.radius_mm is not None]
+    if not configs:
+        raise PipelineError("unseen_shape needs configurations with a curve angle and a radius")
+    rigs = sorted({c.rig for c in configs}, key=lambda r: -sum(c.rig == r for c in configs))
+    configs = [c for c in configs if c.rig == rigs[0]]
+    fit_exc = str(cfg.get("fit_excitation", "sine_decay"))
+    eval_kinds = list(cfg.get("eval_excitations") or [])
+    estimator = dict(cfg.get("estimator") or {})
+    if fits is None:
+        fits = load_models(paths.models)
+    ok = fits[(fits["fit_excitation"] == fit_exc) & fits["model_json"].notna()] \
+        if not fits.empty else fits
+    wanted = cfg.get("families")
+    by_label = {c.label: c for c in configs}
+    per_family: dict[str, dict[str, str]] = {}
+    keys: list[str] = []
+    for rec in ok.to_dict("records"):
+        c = Configuration(str(rec["rig"]), stages._num(rec["curve_angle_deg"]),
+                          stages._num(rec["radius_mm"]))
+        if c.label not in by_label or (wanted and rec["family"] not in wanted):
+            continue
+        per_family.setdefault(str(rec["family"]), {})[c.label] = str(rec["model_json"])
+        keys.append(str(rec["key"]))
+
+    runs: dict[str, list[RunSignal]] = {}
+    for c in configs:
+        by_kind = stages.run_signals(stages.config_rows(dataset, c), input_col=input_col,
+                                     output_col=output_col)
+        kinds = eval_kinds or sorted(k for k in by_kind if k != fit_exc)
+        runs[c.label] = [r for k in kinds for r in by_kind.get(k, [])]
+    settings = {"fit_excitation": fit_exc, "eval_excitations": eval_kinds,
+                "estimator": estimator, "families": wanted,
+                "signals": [input_col, output_col]}
+    key = cache.combine({
+        "stage": "unseen_shape", "models": sorted(keys), "settings": settings,
+        "data": sorted(r.data_hash for rs in runs.values() for r in rs),
+        "code": cache.hash_files([Path(__file__),
+                                  Path(__file__).parents[1] / "hysteresis" / "shape_aware.py"]),
+    })
+    reports = paths.reports
+    out_table = reports / "unseen_shape.parquet"
+    out_summary = reports / "unseen_shape_summary.csv"
+    plot = reports / "plots" / "unseen_shape.png"
+    key_file = reports / KEY_FILE
+    if cfg.get("cache", True) and key_file.exists() and out_table.exists():
+        try:
+            record = json.loads(key_file.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError):
+            record = {}
+        if record.get("key") == key:
+            table = pd.read_parquet(out_table)
+            summary = summarise(table)
+            done = [p for p in (out_table, out_summary, plot) if p.exists()]
+            log.info("unseen_shape: up to date (%s)", key)
+            return UnseenShapeResult(table, summary, done, _best(summary), cached=True,
+                                     seconds=time.perf_counter() - start)
+
+    tasks = []
+    for fam, labelled in sorted(per_family.items()):
+        have = [c for c in configs if c.label in labelled and runs[c.label]]
+        if len(have) < 3:
+            log.warning("unseen_shape: %s has %d configuration(s) with a model and evaluation "
+                        "runs; leave-one-out needs 3", fam, len(have))
+            continue
+        tasks.append((fam, have, [labelled[c.label] for c in have],
+                      {c.label: runs[c.label] for c in have}, estimator))
+    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg.get("n_jobs", 1))
+    if n_jobs > 1 and len(tasks) > 1:
+        from joblib import Parallel, delayed
+
+        # slow simulators first, so the two workers finish together
+        order = sorted(tasks, key=lambda t: t[0] not in ("preisach", "bouc_wen"))
+        results = Parallel(n_jobs=n_jobs)(delayed(_family_task)(*t) for t in order)
+    else:
+        results = [_family_task(*t) for t in tasks]
+    rows = [row for res in results for row in res]
+    table = pd.DataFrame(rows, columns=list(COLUMNS))
+    table["family"] = table["family"].astype("string")
+    table["predictor"] = table["predictor"].astype("string")
+    for col in ("curve_angle_deg", "radius_mm", "rmse"):
+        table[col] = table[col].astype("float64")
+    table = table.sort_values(["family", "curve_angle_deg", "radius_mm", "predictor"],
+                              kind="stable").reset_index(drop=True)
+    summary = summarise(table)
+    files: list[Path] = []
+    with atomic_path(out_table) as tmp:
+        table.to_parquet(tmp, index=False)
+    files.append(out_table)
+    with atomic_path(out_summary) as tmp:
+        summary.to_csv(tmp, index=False)
+    files.append(out_summary)
+    if cfg.get("plot", True) and not table.empty:
+        files.append(figure(table, plot, dpi=int(cfg.get("dpi", 72))))
+    write_text_atomic(key_file, json.dumps({"key": key}, indent=1))
+    seconds = time.perf_counter() - start
+    best = _best(summary)
+    log.info("unseen_shape: %d families x %d configurations in %.1f s; best %s", len(tasks),
+             len(configs), seconds, best)
+    return UnseenShapeResult(table, summary, files, best, cached=False, seconds=seconds)
+
+
+def _best(summary: pd.DataFrame) -> str | None:
+    """The family whose shape-aware model predicts unseen shapes best (lowest median)."""
+    if summary.empty or summary["median_shape_aware"].isna().all():
+        return None
+    return str(summary.loc[summary["median_shape_aware"].idxmin(), "family"])
+
+
+def figure(table: pd.DataFrame, path: Path, *, dpi: int = 72) -> Path:
+    """Per family: each configuration's RMSE under the three predictors."""
+    from pipelines import plots  # sets the Agg backend before pyplot loads
+
+    plt = plots.plt  # type: ignore[attr-defined]
+    fams = sorted(table["family"].astype(str).unique())
+    fig, axes = plt.subplots(len(fams), 1, figsize=(10, 2.2 * len(fams) + 0.6), squeeze=False,
+                             sharex=True)
+    style = {"own": ("k", "o"), "nearest": ("#d62728", "x"), "shape_aware": ("#1f77b4", "s")}
+    for ax, fam in zip(axes[:, 0], fams, strict=True):
+        sub = table[table["family"] == fam]
+        labels: list[str] = []
+        for pred in PREDICTORS:
+            p = sub[sub["predictor"] == pred].sort_values(["curve_angle_deg", "radius_mm"])
+            labels = [f"{a:g}/{r:g}" for a, r in zip(p["curve_angle_deg"], p["radius_mm"],
+                                                     strict=True)]
+            color, marker = style[pred]
+            ax.plot(np.arange(len(p)), p["rmse"], marker=marker, color=color, lw=0.8,
+                    label=f"{pred} (median {p['rmse'].median():.3g})")
+        ax.set_ylabel("RMSE")
+        ax.set_title(fam, fontsize=9)
+        ax.legend(fontsize=7, loc="upper left")
+        ax.set_xticks(np.arange(len(labels)), labels, rotation=90, fontsize=6)
+    axes[-1, 0].set_xlabel("held-out configuration (curve angle deg / radius mm)")
+    fig.suptitle("Leave-one-configuration-out: own model vs nearest vs shape-aware", fontsize=10)
+    fig.tight_layout()
+    return plots._save(fig, path, dpi)
+
+
+def log_result(tracker: Any, run_id: str, result: UnseenShapeResult) -> None:
+    """Summary numbers as metrics, the tables and the plot as artifacts of ``run_id``."""
+    tracker.log(run_id, metrics=result.mlflow_metrics(),
+                tags={"unseen_shape.best_family": str(result.best_family)})
+    for f in result.files:
+        tracker.log_artifact(run_id, f, "unseen_shape")
+
+
+def main_cfg(cfg: Any) -> UnseenShapeResult:
+    """What ``python -m pipelines.unseen_shape`` does with its composed config (also MLflow)."""
+    from pipelines import tracking
+
+    plain = to_container(cfg)
+    paths = Paths.from_config(plain["paths"])
+    result = run(plain)
+    tracker = tracking.Tracker(tracking.settings_from_config(plain.get("tracking", {}),
+                                                             root=paths.root))
+    if tracker.enabled:
+        with tracking.StageRun(tracker, "unseen_shape", sweep_dir=hydra_sweep_dir()) as stage:
+            assert stage.parent_id is not None
+            tracker.log(stage.parent_id,
+                        params=tracking.flatten({k: v for k, v in plain.items()
+                                                 if k != "tracking"}),
+                        tags={"dataset_hash": dataset_hash(paths.processed)})
+            log_result(tracker, stage.parent_id, result)
+            hydra_dir = hydra_output_dir()
+            if hydra_dir is not None:
+                tracker.log_artifact(stage.parent_id, hydra_dir / ".hydra", ".hydra")
+    return result
+
+
+@hydra.main(config_path="../conf", config_name="unseen_shape", version_base="1.3")
+def main(cfg: Any) -> None:
+    main_cfg(cfg)
+
+
+if __name__ == "__main__":
+    main()
