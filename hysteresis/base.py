@@ -121,19 +121,23 @@ def check_inverse_reach(model: Any, *, identified_range: tuple[float, float] | N
     if identified_range is not None:
         lo, hi = (float(v) for v in identified_range)
         where = f" (identified on inputs {lo:.4g}..{hi:.4g})"
-    asked = ""
+    total = float(q.sum())
+    wide = bool(identified_range is not None and p.size
+                and float(p.max()) >= (hi - lo) * (1 - 1e-9))
+    if total > 0 and not wide:
+        return
+    asked = ""  # only built for the message: the check itself is O(n_operators)
     if desired is not None:
         yd = np.asarray(desired, dtype=np.float64)
         if yd.size:
             asked = f"; demanded outputs {float(np.min(yd)):.4g}..{float(np.max(yd)):.4g}"
-    total = float(q.sum())
     if not total > 0:
         raise HysteresisError(
             f"{name} cannot reach the demanded outputs{where}: its total weight sum(Q) = "
             f"{total:.4g} <= 0, so its output does not rise with the input beyond the loop"
             f"{asked}; refit with thresholds inside the identification range or "
             f"constraint='sum_to_one'")
-    if identified_range is not None and p.size and float(p.max()) >= (hi - lo) * (1 - 1e-9):
+    if wide:
         raise HysteresisError(
             f"{name} cannot be trusted to reach the demanded outputs{where}: thresholds up to "
             f"{float(p.max()):.4g} reach the identification range's span {hi - lo:.4g}, so "

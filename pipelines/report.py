@@ -254,8 +254,11 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
                  .get("key") for c in configs}
     settings = {k: v for k, v in cfg.items() if k not in ("paths", "tracking", "n_jobs",
                                                           "cache")}
+    # The unseen-shape stage's summary, shown when it was written (it runs before the report).
+    unseen_csv = reports / "unseen_shape_summary.csv"
     key = cache.combine({
         "stage": "report", "metrics": cache.hash_frame(metrics),
+        "unseen_shape": cache.hash_files([unseen_csv]) if unseen_csv.exists() else "",
         "models": sorted(fits["key"].astype(str)), "predictions": pred_keys,
         "settings": settings,
         "code": cache.hash_files([Path(__file__), Path(plots.__file__)]),
@@ -409,6 +412,19 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
               "other amplitudes) and `band_random` (non-periodic, drifting amplitude and rate) "
               "are evaluation-only: a ratio near 1 there means the model generalises.")
         doc.table(general)
+    unseen_csv = paths.reports / "unseen_shape_summary.csv"
+    unseen = pd.read_csv(unseen_csv) if unseen_csv.exists() else pd.DataFrame()
+    if not unseen.empty:
+        doc.h(2, "Shapes no model was fitted on (leave-one-configuration-out)")
+        doc.p("Median RMSE (mm) over the configurations of each one's evaluation runs, predicted "
+              "by its own model, by the nearest other configuration's model, and by the "
+              "shape-aware model fitted without it (`unseen_shape.parquet`, "
+              "`docs/unseen-shape.md`). Targets: shape-aware / own <= 1.15 and shape-aware "
+              "below nearest in >= 20 of 24 configurations.")
+        doc.table(unseen)
+        fig = paths.reports / "plots" / "unseen_shape.png"
+        if fig.exists():
+            doc.img(fig, "Leave-one-configuration-out RMSE per configuration")
     doc.h(2, f"Leaderboard per configuration (held-out {metric}, winner in the last column)")
     if not board.empty:
         wide = board.pivot_table(index=["rig", "curve_angle_deg", "radius_mm"],

@@ -106,3 +106,24 @@ def test_too_few_configurations_are_skipped(
     cfg = _cfg(tmp_path, config={"rig": None, "curve_angle_deg": [15, 90], "radius_mm": 30})
     result = unseen_shape.run(cfg, dataset=data, fits=fits)
     assert result.table.empty and result.best_family is None
+
+
+def test_the_report_shows_the_summary(fitted: tuple[Path, pd.DataFrame, pd.DataFrame]) -> None:
+    from pipelines import report as report_stage
+    from pipelines import validate as validate_stage
+
+    root, data, fits = fitted
+    unseen_shape.run(_cfg(root), dataset=data, fits=fits)
+    validate_stage.run(stage_cfg(root, heldout=["triangle_decay"]), dataset=data, fits=fits)
+    rcfg = stage_cfg(root, fit_excitation="sine_decay", metric="rmse", formats=["md"],
+                     plots={"per_configuration": False, "dpi": 30, "max_points": 200})
+    first = report_stage.run(rcfg)
+    md = (root / "data" / "reports" / "report.md").read_text()
+    assert "Shapes no model was fitted on" in md and "plots/unseen_shape.png" in md
+    summary = pd.read_csv(root / "data" / "reports" / "unseen_shape_summary.csv")
+    assert f"{summary['median_shape_aware'].iloc[0]:.3g}" in md
+    # a changed unseen-shape summary redraws the report (it is part of the report's key)
+    assert report_stage.run(rcfg).cached
+    unseen_shape.run(_cfg(root, families=["gamma"]), dataset=data, fits=fits)
+    again = report_stage.run(rcfg)
+    assert not again.cached and again.key != first.key
