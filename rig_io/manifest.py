@@ -34,6 +34,14 @@ from rig_io.run import FORMAT
 log = logging.getLogger(__name__)
 
 RIGS = ("tsm-bench", "bending-joint")
+def excitation_name(excitation: dict[str, Any]) -> str:
+    """The dataset's name for a run's excitation: its ``kind``, or, for a ``free`` run that
+    carries a ``name``, that name (how a lab labels an excitation the format does not list)."""
+    kind = str(excitation["kind"])
+    name = excitation.get("name")
+    return str(name) if kind == "free" and isinstance(name, str) and name else kind
+
+
 EXCITATION_KINDS = ("sine_decay", "triangle_decay", "trapezoid_decay", "ramp", "sine",
                     "sine_decay_offset", "mixed_sine", "compensated", "free")
 ENCODER_UNITS = ("mm", "deg")
@@ -116,6 +124,8 @@ class Excitation(_Model):
     terms: Annotated[list[MixedTerm], Field(max_length=1000)] | None = None
     target: Excitation | None = None
     model: str | None = None
+    #: What a ``free`` run is called in the dataset (the format has no kind for it).
+    name: SafeId | None = None
 
 
 class Encoder(_Model):

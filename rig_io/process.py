@@ -15,6 +15,7 @@ import pandas as pd
 
 from rig_io.calibrate import PhysicalRun, encoder_unit, vision_unit
 from rig_io.errors import RigIOError
+from rig_io.manifest import excitation_name
 from rig_io.normalise import normalise
 from rig_io.schema import COLUMNS
 from rig_io.synchronise import SyncOptions, synchronise
@@ -71,7 +72,7 @@ def process_run(run: PhysicalRun, *, sync: SyncOptions | None = None
         "rig": pd.Series([str(m.get("rig", ""))] * n, dtype="str"),
         "curve_angle_deg": np.full(n, num(config.get("curve_angle_deg"))),
         "radius_mm": np.full(n, num(config.get("radius_mm"))),
-        "excitation": pd.Series([str(m["excitation"]["kind"])] * n, dtype="str"),
+        "excitation": pd.Series([excitation_name(m["excitation"])] * n, dtype="str"),
         "t_s": t_s,
         "input": norm["input"],
         "output": norm["output"],

@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from rig_io.manifest import EXCITATION_KINDS as FORMAT_KINDS
+
 FloatArray = npt.NDArray[np.float64]
 
 EXCITATION_KINDS = ("sine_decay", "triangle_decay", "trapezoid_decay", "ramp", "sine",
@@ -253,7 +255,10 @@ def manifest_excitation(kind: str, params: dict[str, Any]) -> dict[str, Any]:
     """The manifest's ``excitation`` block (``free`` samples are not written)."""
     if kind == "free":
         return {"kind": "free"}
-    out: dict[str, Any] = {"kind": kind}
+    # The log format lists no kind for the rig's own extra excitations: they are written as
+    # ``free`` runs with their name, which ingest uses as the dataset's excitation.
+    out: dict[str, Any] = ({"kind": kind} if kind in FORMAT_KINDS
+                           else {"kind": "free", "name": kind})
     for key, value in params.items():
         if isinstance(value, np.ndarray):
             value = value.tolist()
