@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -49,9 +50,11 @@ def _bench(work: Path) -> dict[str, Any]:
             cmd = cc.sweep_command(root=root, sweep_dir=sweep_dir, launcher=launcher,
                                    tracking_uri=services.tracking_uri,
                                    ray_address=services.ray_address, overrides=overrides)
+            load = [round(x, 2) for x in os.getloadavg()]  # shared machine: read with it
             code, wall = cc.run_sweep(cmd, log_file=work / "logs" / f"sweep_{launcher}.log")
             counted = cc.count_runs(services.tracking_uri, sweep_dir)
             out[launcher] = {"exit": code, "wall_s": round(wall, 1),
+                             "s_per_job": round(wall / expected, 2), "load_avg_before": load,
                              "runs": counted["runs"], "finished": counted["finished"],
                              "with_dataset": counted["with_dataset"],
                              "lost": expected - len(counted["keys"])}
