@@ -60,7 +60,7 @@ pipeline: $(STAMP)
 	$(PY) -m pipelines.run_all $(ARGS)
 
 test: $(STAMP)
-	$(PY) -m pytest -n 2 --dist loadfile
+	$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/team
 
 bench: $(STAMP)
 	$(PY) -m bench.run --out bench/results.json
@@ -115,14 +115,14 @@ postgresql:
 # screenshot to data/reports/ui/.
 ui-check: $(TEAM_STAMP) chromium
 	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
-	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/pipelines/test_ui_browser.py
+	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/team/test_ui_browser.py
 
 # The tests that need the team extras: the UI check above and tracking=server against a
-# throwaway PostgreSQL + MLflow server (tests/pipelines/test_tracking_server.py). CI runs it.
+# throwaway PostgreSQL + MLflow server (tests/team/test_tracking_server.py). CI runs it.
 team-test: $(TEAM_STAMP) chromium postgresql
 	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
-	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/pipelines/test_ui_browser.py \
-	  tests/pipelines/test_tracking_server.py
+	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/team/test_ui_browser.py \
+	  tests/team/test_tracking_server.py
 
 # Throwaway PostgreSQL + MLflow server + Ray head on 127.0.0.1, a 24-job fit sweep through
 # hydra's Ray launcher, runs counted in the server: prints `lost N`, exits 0 only for lost 0.

@@ -4,7 +4,7 @@ their datasets, artifacts and the registered champions are read back through the
 and a champion loads by name in a fresh process. Every service is stopped and checked gone.
 
 Needs psycopg2 and Debian's postgresql: ``make team-test`` installs both and runs this file
-(CI runs that target); in the base venv the module is skipped at collection, saying so.
+(CI runs that target). `make test` leaves tests/team/ out: these need the team venv.
 """
 
 from __future__ import annotations

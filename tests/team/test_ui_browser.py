@@ -5,8 +5,8 @@ datasets; a run page shows ``heldout.rmse``; screenshots go to ``data/reports/ui
 is left behind.
 
 Needs playwright and a system chromium: ``make ui-check`` installs both (requirements-team.lock,
-apt-get) and runs this file; CI runs that target. In the base venv (``make test``) playwright
-is absent and the module is skipped at collection, saying so.
+apt-get) and runs this file; CI runs that target. ``make test`` leaves tests/team/ out: it
+needs the team venv.
 """
 
 from __future__ import annotations
