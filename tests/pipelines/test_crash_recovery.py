@@ -58,7 +58,8 @@ def _run(stage: str, root: Path) -> float:
     return time.perf_counter() - t0
 
 
-def _kill_at(stage: str, root: Path, after_s: float) -> int:
+def _kill_at(stage: str, root: Path, after_s: float) -> tuple[int, bool]:
+    """Start ``stage``, SIGKILL it after ``after_s``; (pid, whether it was still running)."""
     proc = subprocess.Popen(_cmd(stage, root), cwd=root, env=_env(),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
@@ -66,7 +67,8 @@ def _kill_at(stage: str, root: Path, after_s: float) -> int:
     except subprocess.TimeoutExpired:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
-    return proc.pid
+        return proc.pid, True
+    return proc.pid, False
 
 
 def _outputs(root: Path) -> dict[str, object]:
@@ -108,7 +110,7 @@ def test_kill_minus_9_at_random_moments_then_the_same_command_recovers(
     reference = _outputs(root)
     assert len([k for k in reference if "/samples/" in k]) == 6
     assert "data/reports/report.md" in reference and len(reference) > 40
-    killed: list[tuple[str, float, int]] = []
+    killed: list[tuple[str, float, int, bool]] = []
     for _ in range(rounds):
         shutil.rmtree(root)
         root.mkdir()
@@ -116,21 +118,22 @@ def test_kill_minus_9_at_random_moments_then_the_same_command_recovers(
         victims = set(rng.sample(list(STAGES), min(n_kills, len(STAGES))))
         for stage in STAGES:
             if stage in victims:
-                moment = rng.uniform(0.2, durations[stage])
-                killed.append((stage, round(moment, 2), _kill_at(stage, root, moment)))
+                moment = rng.uniform(0.2, 0.9 * durations[stage])
+                killed.append((stage, round(moment, 2), *_kill_at(stage, root, moment)))
             _run(stage, root)
         where = f"seed {seed}, kills {killed}"
         leftovers = [p for p in root.rglob("*") if is_temporary(p.name)]
         assert leftovers == [], where
         staging = [p for p in Path(tempfile.gettempdir()).glob(f"tsm-mlflow-{host_tag()}-*")
                    if any(p.name.startswith(f"tsm-mlflow-{host_tag()}-{pid}-")
-                          for _, _, pid in killed)]
+                          for _, _, pid, _ in killed)]
         assert staging == [], where
         client = MlflowClient(f"sqlite:///{root}/mlflow.db")
         exp = client.get_experiment_by_name("tsm-hysteresis")
         running = client.search_runs([exp.experiment_id], "attributes.status = 'RUNNING'")
         assert running == [], where
         assert _outputs(root) == reference, where
+    assert any(hit for *_, hit in killed), f"no kill landed while a stage ran: {killed}"
 
 
 def test_a_campaign_killed_before_its_book_is_final_is_completed(tmp_path: Path) -> None:
