@@ -16,7 +16,7 @@ ARGS ?=
 RUNS ?= data/raw/virtual
 REPORT ?= data/reports/discrepancy.json
 
-.PHONY: help venv data generate ingest fit validate report pipeline test bench ui \
+.PHONY: help venv data generate ingest fit validate report pipeline test bench crash-test ui \
         compensate discrepancy discrepancy-study lint typecheck clean clean-data \
         venv-team chromium postgresql cluster-check ui-check team-test bench-cluster
 
@@ -64,6 +64,12 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m bench.run --out bench/results.json
+
+# kill -9 every stage at random moments, ROUNDS times, and check each re-run (several minutes)
+ROUNDS ?= 5
+crash-test: $(STAMP)
+	TSM_CRASH_ROUNDS=$(ROUNDS) TSM_CRASH_KILLS=5 $(PY) -m pytest -q -n 0 \
+		tests/pipelines/test_crash_recovery.py -k random
 
 ui: $(STAMP)
 	@echo "runs table: http://127.0.0.1:5000/#/experiments/1?workflowType=machine_learning"

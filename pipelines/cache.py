@@ -140,6 +140,21 @@ def code_files(module: str) -> dict[str, Path]:
     return found
 
 
+def file_digests(paths: Iterable[Path]) -> dict[str, str]:
+    """``{path: content hash}`` of output files, stored beside a cache key."""
+    return {str(p): hash_files([Path(p)]) for p in paths}
+
+
+def files_intact(digests: Mapping[str, str]) -> bool:
+    """True when every file still exists with the content hash it was recorded with; a
+    truncated or edited output is then recomputed instead of trusted."""
+    try:
+        return all(Path(p).is_file() and hash_files([Path(p)]) == h
+                   for p, h in digests.items())
+    except OSError:
+        return False
+
+
 @lru_cache(maxsize=64)
 def source_hash(cls: type) -> str:
     """Hash of the code a model family runs: the module defining ``cls`` and every module

@@ -41,6 +41,31 @@ def _register_resolvers() -> None:
 
 _register_resolvers()
 
+_WATCHING_PARENT = False
+
+
+def exit_with_parent(parent_pid: int, *, poll_s: float = 0.5) -> None:
+    """In a pool worker: exit as soon as the process ``parent_pid`` is gone.
+
+    A pool's workers outlive a parent killed with SIGKILL: they run the tasks already queued
+    to them and then idle forever. A daemon thread polls the parent id (a reparented worker
+    sees another one) and ends the worker; its half-written temporaries are removed by the
+    next run of the stage. Idempotent; a no-op in the parent itself.
+    """
+    global _WATCHING_PARENT
+    if _WATCHING_PARENT or os.getpid() == parent_pid:
+        return
+    _WATCHING_PARENT = True
+    import threading
+    import time
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
 
 @dataclass(frozen=True)
 class Paths:

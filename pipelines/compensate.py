@@ -60,7 +60,7 @@ from hysteresis.compensation import (
     triangle_profile,
 )
 from hysteresis.shape_aware import ShapeAwareModel
-from rig_io.atomic import atomic_path, contained, write_text_atomic
+from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
 DT_S = 0.01  # the rig's 10 ms control tick
@@ -804,6 +804,7 @@ def run(cfg: Mapping[str, Any], *, backend: RigBackend | None = None) -> dict[st
     cfgd = _cfg_dict(cfg)
     backend = backend or virtual_backend()
     out_dir = Path(str(cfgd["out_dir"]))
+    clean_leftovers(out_dir)  # temporaries of a killed compensate
     art = Artifacts(out_dir, plots=bool(cfgd.get("plots", True)))
     seed = int(cfgd.get("seed", 0))
     progress = bool(cfgd.get("progress", True))

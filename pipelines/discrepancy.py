@@ -34,9 +34,19 @@ from hysteresis.discrepancy.workflow import (
     run_workflow,
     strip_private,
 )
-from rig_io.atomic import atomic_path, contained, write_text_atomic
+from rig_io.atomic import (
+    atomic_path,
+    clean_leftovers,
+    clean_owned_temp,
+    contained,
+    owned_prefix,
+    write_text_atomic,
+)
 
 log = logging.getLogger(__name__)
+#: Work folders in the temp dir: ``tsm-discrepancy-<host>-<pid>-*`` (leaks of killed runs
+#: are removed when the stage starts).
+TEMP_TAG = "tsm-discrepancy"
 HELDOUT_ROLES = ("held_out", "heldout", "validation", "test")
 
 
@@ -244,9 +254,12 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     if not cfg.get("report"):
         raise DiscrepancyError("report=<file.json> is required")
     report_path = Path(str(cfg["report"])).resolve()
+    clean_leftovers(report_path.parent, recursive=False)  # temporaries of a killed run
+    clean_leftovers(report_path.parent / f"{report_path.stem}_plots")
     progress = bool(cfg.get("progress", True))
     mapping = cfg.get("importer")
-    with tempfile.TemporaryDirectory(prefix="tsm-discrepancy-") as tmp:
+    clean_owned_temp(TEMP_TAG)  # work folders of killed runs
+    with tempfile.TemporaryDirectory(prefix=owned_prefix(TEMP_TAG)) as tmp:
         rows, meta, ingest_rep = ingest_source(cfg["source"], Path(tmp), mapping=mapping,
                                                progress=progress)
     sig = dict(cfg.get("signals") or {})

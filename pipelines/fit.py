@@ -155,7 +155,8 @@ def load_models(models_dir: Path) -> pd.DataFrame:
         if record.get("format") != MODEL_FILE_FORMAT:
             continue
         model = record.pop("model", None)
-        if record.get("model_sha256") != cache.hash_json(model):  # edited or damaged: refit
+        stored = record.get("model_sha256")  # absent in files written before it existed
+        if stored is not None and stored != cache.hash_json(model):  # damaged/edited: refit
             log.warning("ignoring model file %s: content does not match its hash", path)
             continue
         row = {c: record.get(c) for c in stages.FIT_COLUMNS}

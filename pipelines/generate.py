@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import sys
 import time
 from collections.abc import Iterable, Mapping
@@ -77,8 +78,14 @@ def target_path(out: Path, run_id: str, fmt: str) -> Path:
         raise GenerateError(f"run_id {run_id!r}: {err}") from None
 
 
-def write_one(spec: dict[str, Any], out: str, fmt: str, compress: bool) -> dict[str, Any]:
-    """Simulate and write one run (runs in a worker process)."""
+def write_one(spec: dict[str, Any], out: str, fmt: str, compress: bool, *,
+              parent_pid: int | None = None) -> dict[str, Any]:
+    """Simulate and write one run (runs in a worker process; with ``parent_pid`` the worker
+    ends itself when that process is gone)."""
+    if parent_pid is not None:
+        from pipelines.common import exit_with_parent
+
+        exit_with_parent(parent_pid)
     t0, c0 = time.perf_counter(), time.process_time()
     run = simulate_run(**spec)
     t1, c1 = time.perf_counter(), time.process_time()
@@ -151,7 +158,9 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
         from joblib import Parallel, delayed
 
         par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered")
-        stream = par(delayed(write_one)(s, str(out), fmt, compress) for s in todo)
+        me = os.getpid()
+        stream = par(delayed(write_one)(s, str(out), fmt, compress, parent_pid=me)
+                     for s in todo)
     else:
         stream = (write_one(s, str(out), fmt, compress) for s in todo)
     by_id = {s["run_id"]: s for s in specs}

@@ -269,7 +269,9 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
             record = json.loads(key_file.read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError):
             record = {}
-        if record.get("key") == key and all(Path(f).exists() for f in record.get("files", [])):
+        digests = record.get("sha256") or {}
+        if (record.get("key") == key and set(digests) == set(record.get("files", []))
+                and cache.files_intact(digests)):
             log.info("report: up to date (%s)", key)
             return ReportResult(reports, [Path(f) for f in record["files"]],
                                 {k: [Path(p) for p in v]
@@ -348,7 +350,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
         files.append(write_text_atomic(reports / "report.html",
                                        doc.html("TSM hysteresis pipeline report")))
     write_text_atomic(key_file, json.dumps({
-        "key": key, "files": [str(f) for f in files],
+        "key": key, "files": [str(f) for f in files], "sha256": cache.file_digests(files),
         "config_plots": {k: [str(p) for p in v] for k, v in config_plots.items()},
     }, indent=1))
     seconds = time.perf_counter() - start

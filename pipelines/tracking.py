@@ -22,7 +22,6 @@ import functools
 import logging
 import os
 import random
-import re
 import subprocess
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -348,9 +347,7 @@ def _jsonable(frame: pd.DataFrame) -> pd.DataFrame:
 #: Tags naming the process that owns a run (host tag, pid): a RUNNING run whose process no
 #: longer exists on this host was killed, and the next stage ends it as FAILED.
 HOST_TAG, PID_TAG = "tsm.host", "tsm.pid"
-STAGING_PREFIX = "tsm-mlflow-"
-_STAGING_RE = re.compile(rf"^{STAGING_PREFIX}(?P<host>[0-9a-f]{{8}})-(?P<pid>\d+)-")
-
+STAGING_TAG = "tsm-mlflow"
 
 def owner_tags() -> dict[str, str]:
     from rig_io.atomic import host_tag
@@ -403,27 +400,16 @@ def end_dead_runs(tracker: Tracker) -> list[str]:
 
 def staging_prefix() -> str:
     """Prefix of a staging folder in the temp dir, naming its owner (host tag, pid)."""
-    from rig_io.atomic import host_tag
+    from rig_io.atomic import owned_prefix
 
-    return f"{STAGING_PREFIX}{host_tag()}-{os.getpid()}-"
+    return owned_prefix(STAGING_TAG)
 
 
 def clean_staging_leftovers(folder: str | Path | None = None) -> list[Path]:
     """Remove staging folders (``tsm-mlflow-<host>-<pid>-*``) of dead processes."""
-    import shutil
-    import tempfile
+    from rig_io.atomic import clean_owned_temp
 
-    from rig_io.atomic import owner_gone
-
-    base = Path(folder or tempfile.gettempdir())
-    removed = []
-    with contextlib.suppress(OSError):
-        for p in base.iterdir():
-            m = _STAGING_RE.match(p.name)
-            if m and p.is_dir() and not p.is_symlink() and owner_gone(m["host"], int(m["pid"])):
-                shutil.rmtree(p, ignore_errors=True)
-                removed.append(p)
-    return removed
+    return clean_owned_temp(STAGING_TAG, folder)
 
 
 # --------------------------------------------------------------------------------------

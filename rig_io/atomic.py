@@ -245,3 +245,24 @@ def clean_leftovers(root: str | os.PathLike[str], *, recursive: bool = True) -> 
         dirs[:] = [d for d in dirs if not is_temporary(d) and (here / d).is_dir()] \
             if recursive else []
     return touched
+
+
+def owned_prefix(tag: str) -> str:
+    """Prefix for a temporary folder in the system temp dir that names its owner
+    (``<tag>-<host>-<pid>-``), so :func:`clean_owned_temp` can tell a leak from a live one."""
+    return f"{tag}-{host_tag()}-{os.getpid()}-"
+
+
+def clean_owned_temp(tag: str, folder: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Remove ``<tag>-<host>-<pid>-*`` folders (default: the system temp dir) whose process
+    is gone; return them."""
+    pattern = re.compile(rf"^{re.escape(tag)}-(?P<host>[0-9a-f]{{8}})-(?P<pid>\d+)-")
+    base = Path(folder if folder is not None else tempfile.gettempdir())
+    removed = []
+    with contextlib.suppress(OSError):
+        for p in base.iterdir():
+            m = pattern.match(p.name)
+            if m and p.is_dir() and not p.is_symlink() and owner_gone(m["host"], int(m["pid"])):
+                shutil.rmtree(p, ignore_errors=True)
+                removed.append(p)
+    return removed

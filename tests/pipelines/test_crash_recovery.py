@@ -1,9 +1,11 @@
-"""kill -9 a stage at a random moment, run the same command again: it completes, leaves no
-temporary file and no RUNNING MLflow run, and its outputs are byte-identical to those of an
-uninterrupted run.
+"""kill -9 a stage (generate, ingest, fit, validate, report) at a random moment, run the
+same command again: it completes, leaves no temporary file and no RUNNING MLflow run, and its
+outputs are byte-identical to those of an uninterrupted run.
 
-``TSM_CRASH_ROUNDS=<n>`` repeats the kill-and-rerun sequence n times with fresh random
-moments (the default 1 keeps the test near 40 s); ``TSM_CRASH_SEED`` fixes the moments.
+Each round kills ``TSM_CRASH_KILLS`` (default 3) of the five stages, chosen at random, each at
+a random moment within its uninterrupted duration, and runs the others straight through.
+``TSM_CRASH_ROUNDS=<n>`` repeats the round n times (default 1: about a minute);
+``TSM_CRASH_KILLS=5`` kills every stage; ``TSM_CRASH_SEED`` replays one sequence.
 """
 
 from __future__ import annotations
@@ -30,12 +32,15 @@ STAGES: dict[str, list[str]] = {
                  "periods_per_amplitude:2,frequency_hz:0.5}]", "n_jobs=1"],
     "ingest": ["pipelines.ingest"],
     "fit": ["pipelines.fit", "families=[linear,gamma]", "n_jobs=1"],
+    "validate": ["pipelines.validate", "n_jobs=1", "progress=false"],
+    "report": ["pipelines.report", "n_jobs=1", "plots.per_configuration=false"],
 }
 
 
 def _cmd(stage: str, root: Path) -> list[str]:
     module, *args = STAGES[stage]
-    return [sys.executable, "-m", module, *args, f"paths.root={root}", "progress=false",
+    quiet = [] if stage in ("validate", "report") else ["progress=false"]
+    return [sys.executable, "-m", module, *args, f"paths.root={root}", *quiet,
             f"hydra.run.dir={root}/outputs/{stage}"]
 
 
@@ -53,7 +58,8 @@ def _run(stage: str, root: Path) -> float:
     return time.perf_counter() - t0
 
 
-def _kill_at(stage: str, root: Path, after_s: float) -> int:
+def _kill_at(stage: str, root: Path, after_s: float) -> tuple[int, bool]:
+    """Start ``stage``, SIGKILL it after ``after_s``; (pid, whether it was still running)."""
     proc = subprocess.Popen(_cmd(stage, root), cwd=root, env=_env(),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
@@ -61,7 +67,8 @@ def _kill_at(stage: str, root: Path, after_s: float) -> int:
     except subprocess.TimeoutExpired:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
-    return proc.pid
+        return proc.pid, True
+    return proc.pid, False
 
 
 def _outputs(root: Path) -> dict[str, object]:
@@ -94,34 +101,39 @@ def test_kill_minus_9_at_random_moments_then_the_same_command_recovers(
         tmp_path: Path) -> None:
     seed = int(os.environ.get("TSM_CRASH_SEED", time.time_ns() % 1_000_000))
     rounds = int(os.environ.get("TSM_CRASH_ROUNDS", "1"))
+    n_kills = int(os.environ.get("TSM_CRASH_KILLS", "3"))
     rng = random.Random(seed)
     root = tmp_path / "root"
     root.mkdir()
     mlflow_store(root)
     durations = {stage: _run(stage, root) for stage in STAGES}
     reference = _outputs(root)
-    assert len([k for k in reference if k.endswith(".parquet")]) == 6
-    killed: list[tuple[str, float, int]] = []
+    assert len([k for k in reference if "/samples/" in k]) == 6
+    assert "data/reports/report.md" in reference and len(reference) > 40
+    killed: list[tuple[str, float, int, bool]] = []
     for _ in range(rounds):
         shutil.rmtree(root)
         root.mkdir()
         mlflow_store(root)
+        victims = set(rng.sample(list(STAGES), min(n_kills, len(STAGES))))
         for stage in STAGES:
-            moment = rng.uniform(0.2, durations[stage])
-            killed.append((stage, round(moment, 2), _kill_at(stage, root, moment)))
+            if stage in victims:
+                moment = rng.uniform(0.2, 0.9 * durations[stage])
+                killed.append((stage, round(moment, 2), *_kill_at(stage, root, moment)))
             _run(stage, root)
         where = f"seed {seed}, kills {killed}"
         leftovers = [p for p in root.rglob("*") if is_temporary(p.name)]
         assert leftovers == [], where
         staging = [p for p in Path(tempfile.gettempdir()).glob(f"tsm-mlflow-{host_tag()}-*")
                    if any(p.name.startswith(f"tsm-mlflow-{host_tag()}-{pid}-")
-                          for _, _, pid in killed)]
+                          for _, _, pid, _ in killed)]
         assert staging == [], where
         client = MlflowClient(f"sqlite:///{root}/mlflow.db")
         exp = client.get_experiment_by_name("tsm-hysteresis")
         running = client.search_runs([exp.experiment_id], "attributes.status = 'RUNNING'")
         assert running == [], where
         assert _outputs(root) == reference, where
+    assert any(hit for *_, hit in killed), f"no kill landed while a stage ran: {killed}"
 
 
 def test_a_campaign_killed_before_its_book_is_final_is_completed(tmp_path: Path) -> None:

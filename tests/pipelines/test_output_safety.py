@@ -162,3 +162,23 @@ def test_a_truncated_processed_file_is_detected_and_processed_again(
     assert {a["run_id"]: a["status"] for a in report["accepted"]} == {
         "run0": "processed", "run1": "unchanged"}
     assert victim.read_bytes() == before[victim]
+
+
+def test_a_truncated_report_output_is_redrawn_not_trusted(tmp_path: Path) -> None:
+    from pipelines import report as report_stage
+
+    data = make_dataset(angles=(90,), radii=(30,), dt=0.1)
+    cfg = stage_cfg(tmp_path, families=["linear", "gamma"])
+    fit_stage.run(cfg, dataset=data)
+    validate_stage.run(cfg, dataset=data)
+    rcfg = {**cfg, "exemplary": {"rig": "tsm-bench", "curve_angle_deg": 90, "radius_mm": 30},
+            "fit_excitation": "sine_decay", "metric": "rmse",
+            "plots": {"per_configuration": True, "dpi": 30, "max_points": 200},
+            "formats": ["md"]}
+    assert not report_stage.run(rcfg).cached
+    assert report_stage.run(rcfg).cached
+    plot = tmp_path / "data/reports/plots/config_tsm-bench_phi090_r030.png"
+    whole = plot.read_bytes()
+    plot.write_bytes(whole[: len(whole) // 3])  # e.g. a disk that filled up
+    again = report_stage.run(rcfg)
+    assert not again.cached and plot.read_bytes() == whole

@@ -84,3 +84,29 @@ def test_a_sweep_with_a_failing_job_leaves_no_run_running(tmp_path: Path) -> Non
     parent = [r for r in runs if r.data.tags.get("sweep") == "true"]
     assert len(parent) == 1 and parent[0].info.status == "FAILED"
     assert "RUNNING" not in {r.info.status for r in runs}
+
+
+def test_a_pool_worker_ends_itself_when_its_parent_is_killed() -> None:
+    import os
+    import signal
+    import time
+
+    from rig_io.atomic import pid_alive
+
+    worker = ("import os, sys, time; from pipelines.common import exit_with_parent; "
+              "exit_with_parent(int(sys.argv[1]), poll_s=0.05); print('ready', flush=True); "
+              "time.sleep(60)")
+    parent = ("import os, subprocess, sys, time; "
+              f"p = subprocess.Popen([sys.executable, '-c', {worker!r}, str(os.getpid())], "
+              "stdout=subprocess.PIPE, text=True); p.stdout.readline(); "
+              "print(p.pid, flush=True); time.sleep(60)")
+    proc = subprocess.Popen([sys.executable, "-c", parent], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    child = int(proc.stdout.readline())
+    assert pid_alive(child)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 10
+    while pid_alive(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not pid_alive(child)
