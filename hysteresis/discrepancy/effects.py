@@ -569,7 +569,8 @@ def fit_base(base: HysteresisModel, u: FloatArray, y: FloatArray) -> HysteresisM
     family's own fit sets that limit again on every call, which costs more than the solve."""
     if not (is_gamma(base) and hasattr(base, "constraint")):
         return base.fit(u, y)
-    from hysteresis.gamma import constrained_lstsq, play_matrix
+    from hysteresis.gamma import constrained_lstsq
+    from hysteresis.play import play_matrix
 
     p = _gamma_thresholds(base)
     a, _ = play_matrix(np.ascontiguousarray(u, dtype=np.float64), p, np.zeros(p.size))
