@@ -515,11 +515,11 @@ class ComposedModel:
             joint = _joint_linear(self.base_factory(), u, y, self._features(run, y))
             if joint is not None:
                 base = self.base_factory()
-                fit_base(base, u, y - self._features(run, y) @ joint)
+                base.fit(u, y - self._features(run, y) @ joint)
                 self.base_, self.coef_ = base, joint
                 return self
         base = self.base_factory()
-        fit_base(base, u, y)
+        base.fit(u, y)
         yb = base.predict(u)
         coef = np.zeros(0)
         if out_terms:
@@ -530,7 +530,7 @@ class ComposedModel:
                 coef = _lstsq(phi, y - yb)
                 g = phi @ coef
                 base = self.base_factory()
-                fit_base(base, u, y - g)
+                base.fit(u, y - g)
                 yb = base.predict(u)
                 sse = float(np.sum((y - yb - self._features(run, yb, coef) @ coef) ** 2))
                 known = coef
@@ -561,39 +561,6 @@ class ComposedModel:
     @property
     def n_params(self) -> int:
         return sum(t.effect.n_params for t in self.terms)
-
-
-def fit_base(base: HysteresisModel, u: FloatArray, y: FloatArray) -> HysteresisModel:
-    """``base.fit(u, y)``; a Gamma base is solved here directly. The workflow refits it
-    thousands of times inside one thread limit (:func:`.workflow.run_workflow`), and the
-    family's own fit sets that limit again on every call, which costs more than the solve."""
-    if not (is_gamma(base) and hasattr(base, "constraint")):
-        return base.fit(u, y)
-    from hysteresis.gamma import constrained_lstsq
-    from hysteresis.play import play_matrix
-
-    p = _gamma_thresholds(base)
-    a, _ = play_matrix(np.ascontiguousarray(u, dtype=np.float64), p, np.zeros(p.size))
-    n = p.size
-    offset = bool(getattr(base, "fit_offset", False))
-    if offset:
-        a = np.column_stack([a, np.ones(u.size)])
-    if a.shape[0] < a.shape[1]:
-        raise HysteresisError(f"need at least {a.shape[1]} samples to fit, got {a.shape[0]}")
-    if getattr(base, "constraint", "free") == "free":
-        x, *_ = np.linalg.lstsq(a, y, rcond=None)
-        lam = float("nan")
-    else:
-        c = np.zeros(a.shape[1])
-        c[:n] = 1.0
-        x, lam = constrained_lstsq(a, y, c, 1.0)
-    resid = a @ x - y
-    attrs = {"thresholds_": p, "weights_": np.ascontiguousarray(x[:n]),
-             "offset_": float(x[n]) if offset else 0.0, "lagrange_multiplier_": lam,
-             "sse_": float(resid @ resid), "n_samples_": int(u.size)}
-    for k, v in attrs.items():
-        setattr(base, k, v)
-    return base
 
 
 def _gamma_thresholds(base: HysteresisModel) -> FloatArray:

@@ -37,7 +37,6 @@ from hysteresis.discrepancy.effects import (
     ComposedModel,
     Effect,
     Term,
-    fit_base,
     fit_joint,
     fit_with_effect,
 )
@@ -280,7 +279,7 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
     ``strength`` x the output's standard deviation); the plain base is refitted to the distorted
     signal. Returns the remaining fraction of the distortion (near 0: within the base's reach).
     """
-    base = fit_base(base_factory(), ident.u, ident.y)
+    base = base_factory().fit(ident.u, ident.y)
     y0 = base.predict(ident.u)
     out: dict[str, float] = {}
     for name in names:
@@ -302,7 +301,7 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
         dist = _rmse(y_syn - y0)
         if dist == 0:
             continue
-        refit = fit_base(base_factory(), ident.u, y_syn)
+        refit = base_factory().fit(ident.u, y_syn)
         out[name] = _rmse(y_syn - refit.predict(ident.u)) / dist
     return out
 
