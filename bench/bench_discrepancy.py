@@ -1,4 +1,4 @@
-"""Benchmark of the discrepancy workflow (issue 7).
+"""Benchmark of the discrepancy workflow.
 
 One virtual-rig configuration (90 deg / 30 mm) with a hidden time delay and drift, seed 001
 excitations with 3 periods per amplitude, analysed at 20 Hz with the Gamma base. Reports the

@@ -5,7 +5,7 @@ that advances the rig by one control tick (the virtual rig's ``VirtualRig.step``
 plant in a test) and returns at least the key named by ``output_key``. Nothing here touches
 files, MLflow or the virtual rig's internals.
 
-The schemes (papers in ``/work/shared/seeds``):
+The schemes (papers in ``../shared/seeds``):
 
 * **inverse feed-forward** (seed 001 section 4.6-4.7, seed 002 eq. 4): run a model's inverse on
   the desired output and play the resulting input open loop (:func:`run_open_loop`);

@@ -1,5 +1,5 @@
 """Stage ``discrepancy``: find where model and measurement disagree, name the missing effect,
-add it, show the gap shrink (issue 7; method in ``docs/discrepancy.md``).
+add it, show the gap shrink (method in ``docs/discrepancy.md``).
 
     python -m pipelines.discrepancy source=<dir of raw runs or bags> report=<file.json>
 

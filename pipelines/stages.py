@@ -27,7 +27,7 @@ from hysteresis.base import HysteresisModel
 from hysteresis.metrics import METRIC_NAMES, error_statistics
 from pipelines import cache
 
-#: The columns of ``data/reports/metrics.parquet``, in order (issue 4).
+#: The columns of ``data/reports/metrics.parquet``, in order.
 METRICS_COLUMNS: tuple[str, ...] = (
     "family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation", "eval_excitation",
     "split", *METRIC_NAMES,

@@ -1,4 +1,4 @@
-"""The discrepancy workflow on virtual-rig runs with hidden effects (issue 7, "done when").
+"""The discrepancy workflow on virtual-rig runs with hidden effects.
 
 Each case simulates a pair of configurations x the three excitations of seed 001 (sine_decay
 identifies, triangle_decay and trapezoid_decay are held out; 3 periods per amplitude to keep the
