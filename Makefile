@@ -16,7 +16,7 @@ ARGS ?=
 RUNS ?= data/raw/virtual
 REPORT ?= data/reports/discrepancy.json
 
-.PHONY: help venv data generate ingest fit validate report pipeline test bench crash-test ui \
+.PHONY: help venv data generate ingest fit validate report pipeline test test-fast bench crash-test ui \
         compensate discrepancy discrepancy-study lint typecheck clean clean-data \
         venv-team chromium postgresql cluster-check ui-check team-test bench-cluster
 
@@ -61,6 +61,10 @@ pipeline: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/team
+
+# the inner loop: everything but the tests marked slow (simulated campaigns, subprocess kills)
+test-fast: $(STAMP)
+	$(PY) -m pytest -n 2 -m 'not slow' --ignore=tests/team
 
 bench: $(STAMP)
 	$(PY) -m bench.run --out bench/results.json

@@ -31,6 +31,9 @@ from hysteresis.discrepancy.workflow import (
 from pipelines.discrepancy_study import hidden_effect_runs, per_configuration_heldout
 from rig_io.virtual.effects import EffectStrengths
 
+# dozens of discrepancy workflows on simulated campaigns: `make test-fast` leaves these out
+pytestmark = pytest.mark.slow
+
 PAIRS = {
     "a": ((90.0, 30.0), (45.0, 60.0)),  # the pair the workflow was built on
     "e": ((90.0, 45.0), (90.0, 60.0)),  # one wrap, two radii

@@ -21,10 +21,14 @@ import tempfile
 import time
 from pathlib import Path
 
+import pytest
 from mlflow import MlflowClient
 
 from rig_io.atomic import host_tag, is_temporary
 from tests.pipelines.pipeline_data import mlflow_store
+
+# kill -9 of stages in subprocesses: `make test-fast` leaves these out
+pytestmark = pytest.mark.slow
 
 STAGES: dict[str, list[str]] = {
     "generate": ["pipelines.generate", "campaign=quick", "campaign.radii_mm=[30,60,75]",

@@ -11,6 +11,9 @@ from hydra import compose, initialize_config_dir
 from pipelines import discrepancy_study as study
 from pipelines.common import CONF_DIR, to_container
 
+# the detection study end to end: `make test-fast` leaves these out
+pytestmark = pytest.mark.slow
+
 
 def _cfg(tmp_path: Path, tracking: str = "off", **over: object) -> dict[str, object]:
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):

@@ -8,9 +8,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from mlflow import MlflowClient
 
 from tests.pipelines.pipeline_data import make_dataset, mlflow_store, write_dataset
+
+# a 16-job Hydra sweep in subprocesses: `make test-fast` leaves these out
+pytestmark = pytest.mark.slow
 
 ANGLES = (15, 30, 45, 60)
 RADII = (30, 45, 60, 75)
