@@ -80,7 +80,7 @@ def test_band_random_short_record_and_manifest() -> None:
     t, y = make_excitation("band_random", **{**BAND, "duration_s": 10.0})
     assert t[-1] == pytest.approx(10.0) and np.max(np.abs(y)) == pytest.approx(5.0)
     block = manifest_excitation("band_random", {**BAND, "rate_range": (0.5, 1.5)})
-    assert block == {"kind": "band_random", **BAND, "rate_range": [0.5, 1.5]}
+    assert block == {"kind": "free", "name": "band_random", **BAND, "rate_range": [0.5, 1.5]}
 
 
 @pytest.mark.parametrize(("params", "match"), [
