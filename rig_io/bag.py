@@ -341,7 +341,10 @@ def _physical(decoded: dict[str, dict[str, Any]], topics: set[str], p: Path, hin
     phys = PhysicalRun(manifest=manifest, encoder=_joints(decoded[T_JOINTS], manifest,
                                                           run_id, file),
                        files={s: file for s in ("encoder", "loadcell", "camera", "tracker",
-                                                "events")})
+                                                "events")},
+                       applied={"values": "SI as recorded in the bag (joint positions, "
+                                          "forces); only the unit of the manifest's encoder "
+                                          "applies"})
     if T_LOAD_IN in decoded or T_LOAD_OUT in decoded:
         for topic in (T_LOAD_IN, T_LOAD_OUT):
             if topic in decoded:  # ordered stamps first: merging repeats would multiply rows

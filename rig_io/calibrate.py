@@ -39,6 +39,9 @@ class PhysicalRun:
     files: dict[str, str] = field(default_factory=dict)
     #: Extra per-sample columns on the encoder time base (importers: e.g. a tension proxy).
     extra: dict[str, npt.NDArray[np.float64]] = field(default_factory=dict)
+    #: What turning the raw values into these did (signs, scales, zeros, start offsets), so
+    #: that ingest records every interpretation it applied with its true value.
+    applied: dict[str, Any] = field(default_factory=dict)
 
     @property
     def run_id(self) -> str:
@@ -120,18 +123,34 @@ def calibrate_raw_run(run: RawRun, *, files: dict[str, str] | None = None) -> Ph
     enc = m["channels"]["encoder"]
     bits, cpu = int(enc["counter_bits"]), float(enc["counts_per_unit"])
     t = run.encoder["t_ns"].to_numpy(dtype=np.int64)
-    inp = counts_to_units(run.encoder["input_counts"].to_numpy(dtype=np.int64),
-                          counts_per_unit=cpu, bits=bits, sign=int(enc["input_sign"]))
+    in_counts = run.encoder["input_counts"].to_numpy(dtype=np.int64)
+    inp = counts_to_units(in_counts, counts_per_unit=cpu, bits=bits,
+                          sign=int(enc["input_sign"]))
+    # Positions are relative to the first sample (format section 1): the counter's start
+    # reading is removed here, and recorded so that no offset is removed silently.
+    applied: dict[str, Any] = {"encoder": {
+        "unit": encoder_unit(m), "counts_per_unit": cpu, "counter_bits": bits,
+        "input_sign": int(enc["input_sign"]), "output_sign": int(enc["output_sign"]),
+        "input_counter_start": int(in_counts[0]),
+        "input_start_removed": int(enc["input_sign"]) * float(in_counts[0]) / cpu}}
     out_raw = run.encoder["output_counts"]
     if out_raw.isna().all():
         out = np.full(t.size, np.nan)
     else:
-        out = counts_to_units(out_raw.to_numpy(dtype=np.int64), counts_per_unit=cpu,
-                              bits=bits, sign=int(enc["output_sign"]))
+        out_counts = out_raw.to_numpy(dtype=np.int64)
+        out = counts_to_units(out_counts, counts_per_unit=cpu, bits=bits,
+                              sign=int(enc["output_sign"]))
+        applied["encoder"].update(
+            output_counter_start=int(out_counts[0]),
+            output_start_removed=int(enc["output_sign"]) * float(out_counts[0]) / cpu)
     encoder = pd.DataFrame({"t_ns": t, "input": inp, "output": out})
     loadcell = None
     if run.loadcell is not None:
         cells = m["channels"]["loadcell"]
+        applied["loadcell"] = {side: {"zero_mv_per_v": float(cells[side]["zero_mv_per_v"]),
+                                      "newton_per_mv_per_v":
+                                          float(cells[side]["newton_per_mv_per_v"])}
+                               for side in ("input", "output")}
         loadcell = pd.DataFrame({
             "t_ns": run.loadcell["t_ns"].to_numpy(dtype=np.int64),
             "tension_in_n": mv_per_v_to_newton(
@@ -145,7 +164,7 @@ def calibrate_raw_run(run: RawRun, *, files: dict[str, str] | None = None) -> Ph
         })
     return PhysicalRun(manifest=m, encoder=encoder, loadcell=loadcell,
                        camera=_vision(run.camera), tracker=_vision(run.tracker),
-                       events=run.events, files=dict(files or {}))
+                       events=run.events, files=dict(files or {}), applied=applied)
 
 
 def _vision(frame: pd.DataFrame | None) -> pd.DataFrame | None:

@@ -182,7 +182,11 @@ def import_file(mapping: dict[str, Any], path: str | os.PathLike[str], *,
                             "output": values["output"] if source == "encoder"
                             else np.full(t_ns.size, np.nan)})
     phys = PhysicalRun(manifest=manifest, encoder=encoder,
-                       files={k: file for k in ("encoder", "loadcell", "camera", "tracker")})
+                       files={k: file for k in ("encoder", "loadcell", "camera", "tracker")},
+                       applied={"mapping": {role: {"column": spec["column"],
+                                                   "scale": float(spec.get("scale", 1.0)),
+                                                   "offset": float(spec.get("offset", 0.0))}
+                                            for role, spec in roles.items()}})
     if source in ("tracker", "camera"):
         setattr(phys, source, pd.DataFrame({
             "t_ns": t_ns, "frame": np.arange(t_ns.size, dtype=np.int64),

@@ -21,7 +21,7 @@ from rig_io.schema import COLUMNS
 from rig_io.synchronise import SyncOptions, synchronise
 
 #: Bumped whenever the processing changes what a run's rows are (part of the cache key).
-INGEST_VERSION = "1.0.0"
+INGEST_VERSION = "1.1.0"
 
 
 def process_run(run: PhysicalRun, *, sync: SyncOptions | None = None
@@ -85,6 +85,7 @@ def process_run(run: PhysicalRun, *, sync: SyncOptions | None = None
         "tension_proxy": col("tension_proxy"),
     }, columns=list(COLUMNS))
     info = dict(synced.info)
+    enc_applied: dict[str, Any] = dict(run.applied.get("encoder") or {})
     info.update(
         run_id=run.run_id,
         rig=m.get("rig"),
@@ -100,8 +101,14 @@ def process_run(run: PhysicalRun, *, sync: SyncOptions | None = None
                "camera": vision_unit(m, "camera") if run.camera is not None else None,
                "tracker": vision_unit(m, "tracker") if run.tracker is not None else None,
                "tension": "N"},
-        input_offset=float(norm["input_offset"]),
-        output_offset=float(norm["output_offset"]),
+        # The whole offset between the recorded reading and the dataset's value: the counter's
+        # start reading (encoder channels) plus the re-zeroing at the run's first sample.
+        input_offset=float(norm["input_offset"]) + float(enc_applied.get("input_start_removed",
+                                                                          0.0)),
+        output_offset=float(norm["output_offset"]) + (
+            float(enc_applied.get("output_start_removed", 0.0)) if source == "encoder" else 0.0),
+        rezeroed={"input": float(norm["input_offset"]), "output": float(norm["output_offset"])},
+        calibration=run.applied,
         input_amplitude=amp,
     )
     return frame, info
