@@ -234,6 +234,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
                                     radius_mm=sel.get("radius_mm"))
     tasks = stages.plan_fits(dataset, family_specs(cfg), configs,
                              fit_excitations=list(cfg.get("fit_excitations", ["sine_decay"])),
+                             fit_runs=list(cfg.get("fit_runs") or []),
                              input_col=input_col, output_col=output_col)
     previous = load_models(paths.models) if cfg.get("cache", True) else None
     progress = bool(cfg.get("progress", False))

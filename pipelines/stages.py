@@ -13,6 +13,7 @@ the runs of the same configuration; the metrics table has one row per
 from __future__ import annotations
 
 import json
+import logging
 import math
 import time
 import warnings
@@ -32,6 +33,7 @@ METRICS_COLUMNS: tuple[str, ...] = (
     "family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation", "eval_excitation",
     "split", *METRIC_NAMES,
 )
+log = logging.getLogger(__name__)
 CONFIG_COLUMNS = ("rig", "curve_angle_deg", "radius_mm")
 #: Columns of the fit results table (one row per family x configuration x fit excitation).
 FIT_COLUMNS: tuple[str, ...] = (
@@ -220,19 +222,47 @@ class FitTask:
     key: str
 
 
+def identification_run(runs: Sequence[RunSignal], chosen: set[str], *,
+                       label: str) -> RunSignal:
+    """The run a configuration identifies on: the only candidate, or the one in ``chosen``.
+
+    Hysteresis models carry a state, so they identify on one record, never a concatenation of
+    records that each start from rest; with several candidates and none named, nothing decides
+    which, and the error says how to decide.
+    """
+    named = [r for r in runs if r.run_id in chosen]
+    if len(named) == 1:
+        return named[0]
+    ids = ", ".join(r.run_id for r in (named or runs))
+    if len(named) > 1:
+        raise PipelineError(f"{label}: fit_runs names {len(named)} runs ({ids}); name one")
+    if len(runs) == 1:
+        return runs[0]
+    raise PipelineError(
+        f"{label}: {len(runs)} runs could identify ({ids}); choose one with "
+        f"fit_runs=[<run id>, ...] (one per configuration and excitation), or fit on another "
+        f"excitation with fit_excitations=[...]")
+
+
 def plan_fits(
     dataset: pd.DataFrame,
     families: Sequence[FamilySpec],
     configs: Sequence[Configuration],
     *,
     fit_excitations: Sequence[str],
+    fit_runs: Sequence[str] = (),
     input_col: str = "input",
     output_col: str = "output",
 ) -> list[FitTask]:
-    """One task per family x configuration x identification excitation present in the data."""
+    """One task per family x configuration x identification excitation present in the data.
+
+    Which run identifies (see :func:`identification_run`): the one run of the excitation in
+    the configuration, or the one named in ``fit_runs``; never a silent pick among several.
+    """
     check_dataset(dataset, signals=(input_col, output_col))
     if not families:
         raise PipelineError("no model family selected")
+    chosen = set(map(str, fit_runs))
     tasks: list[FitTask] = []
     for config in configs:
         by_kind = run_signals(config_rows(dataset, config), input_col=input_col,
@@ -243,9 +273,9 @@ def plan_fits(
                 warnings.warn(f"{config.label}: no {kind!r} run to identify on, skipped",
                               stacklevel=2)
                 continue
-            # Hysteresis models carry a state: identify on one record, never a concatenation
-            # of records that each start from rest. With several runs, the first one is used.
-            run = runs[0]
+            run = identification_run(runs, chosen, label=f"{config.label} {kind!r}")
+            log.info("fit: %s identifies on %s (%s)", config.label, run.run_id,
+                     "named in fit_runs" if run.run_id in chosen else f"its only {kind} run")
             for fam in families:
                 key = cache.combine({
                     "stage": "fit", "family": fam.name, "config": dict(fam.config),

@@ -131,3 +131,38 @@ def test_reads_the_processed_dataset_from_disk(tmp_path: Path) -> None:
     write_dataset(make_dataset(angles=(15,), radii=(30,), dt=0.2), tmp_path)
     fits = fit_stage.run(stage_cfg(tmp_path, families=["linear"]))
     assert len(fits) == 1 and fits["error"].isna().all()
+
+
+def _with_second_sine_decay_run(data: pd.DataFrame) -> pd.DataFrame:
+    """The dataset plus a copy of each configuration's sine_decay run under a new id."""
+    extra = data[data["excitation"] == "sine_decay"].copy()
+    extra["run_id"] = extra["run_id"].astype(str) + "_repeat"
+    extra["output"] = extra["output"] * 1.1  # a different record, so a different model
+    return pd.concat([data, extra], ignore_index=True)
+
+
+def test_several_candidate_runs_stop_the_fit_and_name_the_option() -> None:
+    data = _with_second_sine_decay_run(make_dataset(angles=(15,), radii=(30,), dt=0.2))
+    spec = fit_stage.family_specs({"families": ["linear"]})
+    with pytest.raises(PipelineError, match=r"2 runs could identify .*fit_runs=\["):
+        stages.plan_fits(data, spec, stages.configurations(data),
+                         fit_excitations=["sine_decay"])
+
+
+def test_fit_runs_chooses_the_identification_run_and_the_row_records_it() -> None:
+    data = _with_second_sine_decay_run(make_dataset(angles=(15,), radii=(30,), dt=0.2))
+    spec = fit_stage.family_specs({"families": ["linear"]})
+    repeat = next(r for r in data["run_id"].unique() if str(r).endswith("_repeat"))
+    tasks = stages.plan_fits(data, spec, stages.configurations(data),
+                             fit_excitations=["sine_decay"], fit_runs=[repeat])
+    fits = stages.fit_models(tasks)
+    assert list(fits["fit_run_ids"]) == [repeat]
+    original = repeat.removesuffix("_repeat")
+    other = stages.fit_models(stages.plan_fits(data, spec, stages.configurations(data),
+                                               fit_excitations=["sine_decay"],
+                                               fit_runs=[original]))
+    assert list(other["fit_run_ids"]) == [original]
+    assert other["model_json"].iloc[0] != fits["model_json"].iloc[0]
+    with pytest.raises(PipelineError, match="fit_runs names 2 runs"):
+        stages.plan_fits(data, spec, stages.configurations(data),
+                         fit_excitations=["sine_decay"], fit_runs=[repeat, original])
