@@ -25,6 +25,7 @@ from scipy.optimize import minimize_scalar
 from hysteresis.base import HysteresisError, HysteresisModel
 from hysteresis.discrepancy._ops import FloatArray, play, scaled_play, shift
 from hysteresis.discrepancy.runs import RunData
+from hysteresis.lag import delay_grid
 
 EFFECT_NAMES = (
     "rate_dependence", "tendon_elongation", "time_delay", "drift", "asymmetry",
@@ -243,8 +244,8 @@ class TimeDelay(Effect):
     has_theta = True
 
     def grid(self, ident: RunData) -> list[float]:
-        dt = ident.dt
-        return [k * dt for k in (1, 2, 3, 5, 8, 12, 18, 27, 40) if k * dt <= 0.5]
+        # the range the record can show (seconds on a long compliant drive), not a fixed cap
+        return delay_grid(ident.u, ident.y, ident.dt)
 
     def delayed(self, run: RunData, theta: Any) -> RunData:
         """The output is read late, so the model must see every channel it uses equally late:
