@@ -3,7 +3,8 @@ same command again: it completes, leaves no temporary file and no RUNNING MLflow
 outputs are byte-identical to those of an uninterrupted run.
 
 Each round kills ``TSM_CRASH_KILLS`` (default 3) of the five stages, chosen at random, each at
-a random moment within its uninterrupted duration, and runs the others straight through.
+a random moment within its uninterrupted duration, kills fit once more the moment it has a
+RUNNING MLflow run (a window random moments seldom hit), and runs the others straight through.
 ``TSM_CRASH_ROUNDS=<n>`` repeats the round n times (default 1: about a minute);
 ``TSM_CRASH_KILLS=5`` kills every stage; ``TSM_CRASH_SEED`` replays one sequence.
 """
@@ -15,6 +16,7 @@ import os
 import random
 import shutil
 import signal
+import sqlite3
 import subprocess
 import sys
 import tempfile
@@ -75,6 +77,30 @@ def _kill_at(stage: str, root: Path, after_s: float) -> tuple[int, bool]:
     return proc.pid, False
 
 
+def _kill_when_running(stage: str, root: Path) -> tuple[int, bool]:
+    """Start ``stage`` and SIGKILL it the moment it has a RUNNING run in the MLflow store
+    (the window a random moment seldom hits); (pid, whether it was killed there)."""
+    db = root / "mlflow.db"
+    proc = subprocess.Popen(_cmd(stage, root), cwd=root, env=_env(),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=0.2) as con:
+                n = con.execute("SELECT count(*) FROM runs WHERE status = 'RUNNING' "
+                                "AND run_uuid IN (SELECT run_uuid FROM tags WHERE key = "
+                                "'tsm.pid' AND value = ?)", (str(proc.pid),)).fetchone()[0]
+        except sqlite3.Error:
+            n = 0
+        if n:
+            proc.send_signal(signal.SIGKILL)
+            proc.wait()
+            return proc.pid, True
+        time.sleep(0.01)
+    proc.wait()
+    return proc.pid, False
+
+
 def _outputs(root: Path) -> dict[str, object]:
     """Every output file under ``root/data`` as bytes, except three that carry wall-clock
     time: ``runs.json`` without its ``ingested_at`` fields, a model file without
@@ -124,6 +150,10 @@ def test_kill_minus_9_at_random_moments_then_the_same_command_recovers(
             if stage in victims:
                 moment = rng.uniform(0.2, 0.9 * durations[stage])
                 killed.append((stage, round(moment, 2), *_kill_at(stage, root, moment)))
+            if stage == "fit":  # and once inside its MLflow logging, every round
+                pid, hit = _kill_when_running(stage, root)
+                assert hit, "fit never showed a RUNNING run to be killed in"
+                killed.append(("fit@mlflow", -1.0, pid, hit))
             _run(stage, root)
         where = f"seed {seed}, kills {killed}"
         leftovers = [p for p in root.rglob("*") if is_temporary(p.name)]
