@@ -287,6 +287,7 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         physical_evidence=bool(wf.get("physical_evidence", True)),
         pair_search=bool(wf.get("pair_search", True)),
         joint_retune=bool(wf.get("joint_retune", True)),
+        clean_factor=float(wf.get("clean_factor", WorkflowSettings.clean_factor)),
         progress=progress,
     )
     model_error = None

@@ -254,7 +254,7 @@ def markdown(cases: Sequence[Mapping[str, Any]]) -> str:
                          f"{_fmt(d['halved_from'])} | {', '.join(d['mistaken_for']) or '-'} |")
     clean = [c for c in cases if c["effect"] == "clean"]
     lines += ["", "Clean runs: " + ", ".join(
-        f"{c['pair']} {'no_missing_effect' if c['correct'] else 'named ' + ', '.join(c['named'])}"
+        f"{c['pair']} {c['verdict'] if c['correct'] else 'named ' + ', '.join(c['named'])}"
         for c in clean), ""]
     return "\n".join(lines)
 

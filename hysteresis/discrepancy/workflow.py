@@ -71,6 +71,10 @@ class WorkflowSettings:
     #: two starting points (:func:`.effects.fit_joint`; False: they stay where they were
     #: chosen, only the linear parameters are refitted).
     joint_retune: bool = True
+    #: ``no_missing_effect`` only while the held-out RMSE stays within this multiple of the
+    #: measurement-noise floor (:func:`.locate.noise_floor`); a larger residual that no
+    #: candidate explains is ``unexplained``, never called clean.
+    clean_factor: float = 5.0
     progress: bool = False
 
 
@@ -430,9 +434,11 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                 if st.physical_evidence else [])
     e_id0, e_h0 = evaluations[0].errors(groups)
     e_id1, e_h1 = current.errors(groups)
+    residual = _final_residual(groups, current)
     report: dict[str, Any] = {
         "base_family": base_name,
-        "verdict": "missing_effects_found" if effects else "no_missing_effect",
+        "verdict": _verdict(effects, residual, st.clean_factor),
+        "residual": residual,
         "effects": effects,
         "located": located,
         "within_base_reach": within,
@@ -456,6 +462,26 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     report["_evaluations"] = evaluations
     report["_groups"] = groups
     return report
+
+
+def _final_residual(groups: Sequence[Group], current: Evaluation) -> dict[str, Any]:
+    """The held-out residual of the final model against the measurement noise, and where
+    it is largest (what is left for a user to look at)."""
+    held = [r for g in groups for r in g.heldout]
+    loc = locate(held, [current.held_pred[r.run_id] for r in held])
+    return {"heldout_rmse": loc["rmse"], "noise_floor": loc["noise_floor"],
+            "rmse_over_noise": loc["rmse_over_noise"], "segments": loc["segments"][:5]}
+
+
+def _verdict(effects: Sequence[Mapping[str, Any]], residual: Mapping[str, Any],
+             clean_factor: float) -> str:
+    """``missing_effects_found`` when terms were added; with none, ``no_missing_effect`` only
+    if the held-out residual is within ``clean_factor`` x the noise floor, else
+    ``unexplained`` (the model misses something none of the candidates names)."""
+    if effects:
+        return "missing_effects_found"
+    return ("no_missing_effect" if residual["rmse_over_noise"] <= clean_factor
+            else "unexplained")
 
 
 #: What each load-cell claim means, for the report's notes.

@@ -203,7 +203,9 @@ def test_interacting_effects_are_found_as_a_pair():
     assert pair["relative_gain"] > 0.5 and pair["gain_over_better_member"] >= 0.2
     greedy = report({"asymmetry": 2.0, "time_delay": 1.0},
                     settings=WorkflowSettings(candidates=library, pair_search=False))
-    assert greedy["verdict"] == "no_missing_effect"
+    # greedy alone names nothing, and a residual far above the noise is not called clean
+    assert greedy["effects"] == [] and greedy["verdict"] == "unexplained"
+    assert greedy["residual"]["rmse_over_noise"] > WorkflowSettings().clean_factor
 
 
 @pytest.mark.parametrize("effects", [

@@ -64,7 +64,8 @@ def _case(effect: str, strength: float, pair: str, named: list[str], per: dict[s
 
 def test_detection_limits_take_the_smallest_strength_and_list_misnamings() -> None:
     cases = [
-        _case("clean", 0.0, "a", [], {}),
+        {**_case("clean", 0.0, "a", [], {}), "verdict": "no_missing_effect"},
+        {**_case("clean", 0.0, "b", [], {}), "verdict": "unexplained"},
         {**_case("drift", 0.5, "a", ["tendon_elongation"], {"x": 0.2, "y": 0.2}),
          "measured": ["drift"]},
         _case("drift", 1.0, "a", ["drift"], {"x": 0.6, "y": 0.4}),
@@ -79,7 +80,8 @@ def test_detection_limits_take_the_smallest_strength_and_list_misnamings() -> No
     assert "| a | drift | 1 | 0.100 | drift | - | 40 % | 40 % | no |" in md
     # an effect the load cells show but the model already reproduces has its own column
     assert "| a | drift | 0.5 | 0.100 | tendon_elongation | drift | 20 % | 20 % | no |" in md
-    assert "Clean runs: a no_missing_effect" in md
+    # a clean source whose residual stays far above the noise is reported as unexplained
+    assert "Clean runs: a no_missing_effect, b unexplained" in md
 
 
 def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
