@@ -582,9 +582,11 @@ class BoucWenModel(HysteresisModel):
         h = _simulate(uu, a_, b_, c_, n, alpha, beta, off, h0, u0, int(self.max_substeps), out)
         return out, {"u": float(uu[-1]), "h": float(h)}
 
-    def predict(self, u: Any, *, state: Any = None) -> FloatArray:
-        """Output of eq. 2 along u, from rest (h = 0 at u[0]) or from ``state``."""
-        return self.simulate(u, state=state)[0]
+    def predict(self, u: Any, *, state: Any = None, return_state: bool = False) -> Any:
+        """Output of eq. 2 along u, from rest (h = 0 at u[0]) or from ``state``; with
+        ``return_state`` also the end state (the same face as every family)."""
+        y, end = self.simulate(u, state=state)
+        return (y, end) if return_state else y
 
     def step(self, u: float, state: Any = None) -> tuple[float, dict[str, float]]:
         """One sample: returns (y, new state). ``state=None`` starts at rest at this input."""

@@ -367,9 +367,11 @@ class ColemanHodgdonModel(HysteresisModel):
         y = _ch_simulate(uu, a_, b_, c_, k, y0, u0, _is_euler(self.scheme), out)
         return out, {"u": float(uu[-1]), "y": float(y)}
 
-    def predict(self, u: Any, *, state: Any = None) -> FloatArray:
-        """Output along u from the centre line at u[0] (or from ``state``)."""
-        return self.simulate(u, state=state)[0]
+    def predict(self, u: Any, *, state: Any = None, return_state: bool = False) -> Any:
+        """Output along u from the centre line at u[0] (or from ``state``); with
+        ``return_state`` also the end state (the same face as every family)."""
+        y, end = self.simulate(u, state=state)
+        return (y, end) if return_state else y
 
     def step(self, u: float, state: Any = None) -> tuple[float, dict[str, float]]:
         """One sample: (y, new state)."""
