@@ -27,7 +27,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from hysteresis.base import HysteresisError
-from hysteresis.discrepancy.runs import RunData
+from hysteresis.discrepancy.runs import RunData, split_single_runs
 from hysteresis.discrepancy.workflow import (
     WorkflowSettings,
     base_factory_for,
@@ -267,6 +267,14 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         rows, meta, identify_excitations=list(cfg.get("identify_excitations") or ["sine_decay"]),
         input_col=str(sig.get("input", "input")), output_col=str(sig.get("output", "output")),
         rate_hz=cfg.get("analysis_rate_hz"))
+    # one run per configuration (a common way to record): its head identifies, its tail judges
+    try:
+        runs, run_choice = split_single_runs(
+            runs, heldout_fraction=float(cfg.get("single_run_heldout_fraction", 0.3)))
+    except HysteresisError as err:
+        raise DiscrepancyError(str(err)) from None
+    for key, note in run_choice.items():
+        log.info("discrepancy: %s: %s", key, note)
     base = str(cfg.get("base_family", "auto"))
     base_params = dict(cfg.get("base_params") or {})
     auto_scores: dict[str, float] = {}
@@ -300,6 +308,7 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
                         model_error=model_error)
     report = strip_private(full)
     report["base_params"] = base_params
+    report["run_choice"] = run_choice or None
     report["base_selection"] = auto_scores or None
     report["source"] = str(Path(str(cfg["source"])).resolve())
     report["ingest"] = {"accepted": ingest_rep["n_accepted"], "rejected": ingest_rep["rejected"]}

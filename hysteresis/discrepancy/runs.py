@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -34,6 +35,9 @@ class RunData:
     role: str = "identification"
     #: Sample indices where a new record starts (runs concatenated by :func:`concat_runs`).
     starts: tuple[int, ...] = (0,)
+    #: When the recording began, for a run that is a later segment of a record (time since
+    #: the start keeps counting from there: a creep does not restart mid-record).
+    record_start_s: float | None = None
 
     def __post_init__(self) -> None:
         self.t = as_1d(self.t, f"{self.run_id}: t")
@@ -64,6 +68,18 @@ class RunData:
     def n(self) -> int:
         return int(self.t.size)
 
+    def segment(self, start: int, stop: int, *, role: str, suffix: str) -> RunData:
+        """Samples ``start:stop`` as a run of its own (``<run_id>:<suffix>``), time kept."""
+        def cut(x: FloatArray | None) -> FloatArray | None:
+            return None if x is None else x[start:stop].copy()
+
+        return RunData(run_id=f"{self.run_id}:{suffix}", t=self.t[start:stop].copy(),
+                       u=self.u[start:stop].copy(), y=self.y[start:stop].copy(),
+                       tension=cut(self.tension), tension_out=cut(self.tension_out),
+                       config=dict(self.config), excitation=self.excitation, role=role,
+                       record_start_s=(self.record_start_s if self.record_start_s is not None
+                                       else float(self.t[0])))
+
     @property
     def dt(self) -> float:
         return float(np.median(np.diff(self.t)))
@@ -80,7 +96,9 @@ class RunData:
         out = np.empty(self.n)
         edges = [*self.starts, self.n]
         for a, b in zip(edges[:-1], edges[1:], strict=True):
-            out[a:b] = self.t[a:b] - self.t[a]
+            origin = self.record_start_s if a == 0 and self.record_start_s is not None \
+                else self.t[a]
+            out[a:b] = self.t[a:b] - origin
         return out
 
     @cached_property
@@ -121,7 +139,40 @@ class RunData:
             tension_out=None if self.tension_out is None else dec(self.tension_out),
             config=dict(self.config), excitation=self.excitation, role=self.role,
             starts=tuple(sorted({int(np.ceil(s / factor)) for s in self.starts})),
+            record_start_s=self.record_start_s,
         )
+
+
+def split_single_runs(runs: Sequence[RunData], *, heldout_fraction: float = 0.3
+                      ) -> tuple[list[RunData], dict[str, str]]:
+    """A configuration recorded in one run only (as many labs record one run per shape) is
+    split in time: its head identifies, its last ``heldout_fraction`` is held out. Returns the
+    runs and, per split configuration, a note saying what was done (for the log and report).
+
+    Configurations with several runs are left as they are: their roles decide.
+    """
+    if not 0.05 <= heldout_fraction <= 0.5:
+        raise HysteresisError(f"heldout_fraction must be in [0.05, 0.5], got {heldout_fraction}")
+    by: dict[str, list[RunData]] = {}
+    for r in runs:
+        by.setdefault(r.config_key, []).append(r)
+    out: list[RunData] = []
+    notes: dict[str, str] = {}
+    for key, rs in by.items():
+        if len(rs) != 1:
+            out.extend(rs)
+            continue
+        run = rs[0]
+        cut = int(round(run.n * (1.0 - heldout_fraction)))
+        if cut < 20 or run.n - cut < 20:
+            out.append(run)
+            continue
+        out += [run.segment(0, cut, role="identification", suffix="head"),
+                run.segment(cut, run.n, role="heldout", suffix="tail")]
+        notes[key] = (f"one run ({run.run_id}): identifies on its first "
+                      f"{run.t[cut] - run.t[0]:.1f} s, judged on its last "
+                      f"{run.t[-1] - run.t[cut]:.1f} s ({100 * heldout_fraction:.0f} %)")
+    return out, notes
 
 
 def concat_runs(runs: list[RunData], *, run_id: str | None = None) -> RunData:
