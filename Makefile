@@ -29,7 +29,7 @@ help:
 	@echo "make ui          MLflow UI on http://127.0.0.1:5000"
 	@echo "make compensate  compensation experiments"
 	@echo "make discrepancy RUNS=<dir> REPORT=<file.json>"
-	@echo "make discrepancy-study  detection limits and two-effect cases of the discrepancy workflow (~1 h)"
+	@echo "make discrepancy-study  detection limits and two-effect cases of the discrepancy workflow (about 6 min)"
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(PY) || $(PYTHON_BOOT) -m venv $(VENV)
