@@ -44,6 +44,7 @@ def run() -> dict[str, Any]:
         t_backfit, rep_bf = _time(workflow)
     n_samples = sum(r.n for r in runs)
     return {
+        "blas_limit": blas_limit(),
         "samples_analysed": n_samples,
         "effects_found": [e["name"] for e in rep["effects"]],
         "heldout_rmse_before": rep["summary"]["heldout_rmse_before"],
@@ -56,7 +57,75 @@ def run() -> dict[str, Any]:
     }
 
 
+#: One source per case type and plant: clean, each effect at its reference size, a pair.
+CASES: dict[str, dict[str, float]] = {
+    "clean": {}, **{name: {name: 1.0} for name in (
+        "time_delay", "dead_zone", "rate_dependence", "tendon_elongation", "drift",
+        "asymmetry", "saturation")},
+    "time_delay+drift": {"time_delay": 1.0, "drift": 1.0},
+}
+
+
+def injector_sources() -> dict[str, dict[str, Any]]:
+    """What ``make discrepancy`` does (automatic base, then the workflow) on three 80 s runs
+    from the independent injector (plain Gamma, Preisach and Bouc-Wen plants): seconds, the
+    base chosen, the verdict and what was named, per case type and plant.
+
+    Not part of ``run()``: with the automatic base some sources still take many minutes
+    (``python -m bench.bench_discrepancy --injector``)."""
+    from hydra import compose, initialize_config_dir
+
+    from hysteresis.discrepancy.inject import injected_runs
+    from hysteresis.discrepancy.workflow import base_factory_for, run_workflow
+    from pipelines.common import CONF_DIR, to_container
+    from pipelines.discrepancy import choose_base
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        families = dict(to_container(compose("discrepancy"))["auto_families"])
+    out: dict[str, dict[str, Any]] = {}
+    for plant in ("gamma", "preisach", "bouc_wen"):
+        for case, effects in CASES.items():
+            runs = injected_runs(plant, effects)
+            t0 = time.perf_counter()
+            base, params, _ = choose_base(runs, families)
+            rep = run_workflow(runs, base_factory_for(base, **params), base_name=base)
+            out[f"{plant}:{case}"] = {
+                "seconds": round(time.perf_counter() - t0, 2), "base": base,
+                "verdict": rep["verdict"], "named": [e["name"] for e in rep["effects"]],
+                "heldout_reduction": round(rep["summary"]["heldout_reduction"], 3)}
+    secs = [v["seconds"] for v in out.values()]
+    out["_summary"] = {"sources": len(secs), "max_seconds": max(secs),
+                       "over_60_s": sum(x > 60 for x in secs)}
+    return out
+
+
+def blas_limit(calls: int = 300) -> dict[str, float]:
+    """The one-BLAS-thread limit as identification enters it (thousands of times a
+    workflow): the cached controller against ``threadpool_limits``, which rescans the loaded
+    libraries on every call."""
+    from threadpoolctl import threadpool_limits
+
+    from hysteresis._blas import single_thread_blas
+
+    def ours() -> None:
+        for _ in range(calls):
+            with single_thread_blas():
+                pass
+
+    def reference() -> None:
+        for _ in range(calls):
+            with threadpool_limits(limits=1, user_api="blas"):
+                pass
+
+    ours()
+    t_ours, _ = _time(ours)
+    t_ref, _ = _time(reference)
+    return {"us_per_call_ours": 1e6 * t_ours / calls, "us_per_call_reference": 1e6 * t_ref / calls,
+            "speedup": t_ref / t_ours}
+
+
 if __name__ == "__main__":
     import json
+    import sys
 
-    print(json.dumps(run(), indent=1))
+    print(json.dumps(injector_sources() if "--injector" in sys.argv else run(), indent=1))
