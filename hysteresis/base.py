@@ -14,6 +14,7 @@ Families register themselves by name with :func:`register_family` so that
 
 from __future__ import annotations
 
+import functools
 import inspect
 import json
 from typing import Any, ClassVar, TypeVar
@@ -149,6 +150,27 @@ class HysteresisModel:
     """Base class. Subclasses implement ``fit``, ``predict`` and (where they can) ``invert``."""
 
     family: ClassVar[str] = "base"
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Every family's ``fit`` leaves the model fitted only when it succeeded: a fit that
+        raises removes the fitted attributes (a half-set plane or last run's parameters
+        would otherwise make the model look fitted to data it never fitted)."""
+        super().__init_subclass__(**kwargs)
+        fit = cls.__dict__.get("fit")
+        if fit is None or getattr(fit, "_clears_on_failure", False):
+            return
+
+        @functools.wraps(fit)
+        def fit_or_forget(self: HysteresisModel, u: Any, y: Any, **fit_params: Any) -> Any:
+            try:
+                return fit(self, u, y, **fit_params)
+            except BaseException:
+                for name in list(self.fitted_attributes()):
+                    delattr(self, name)
+                raise
+
+        fit_or_forget._clears_on_failure = True  # type: ignore[attr-defined]
+        cls.fit = fit_or_forget  # type: ignore[method-assign]
 
     # -- scikit-learn parameter protocol -------------------------------------------------
     @classmethod

@@ -459,6 +459,9 @@ class BoucWenModel(HysteresisModel):
 
         ``fit_params`` may carry ``x0`` (initial [A, B, C, n, alpha, beta]) for the raw methods.
         """
+        unknown = sorted(set(fit_params) - {"x0"})
+        if unknown:
+            raise HysteresisError(f"BoucWenModel.fit takes only x0, got {unknown}")
         uu, yy = check_pair(u, y)
         if uu.size < 10:
             raise HysteresisError(f"need at least 10 samples to fit Bouc-Wen, got {uu.size}")

@@ -241,6 +241,9 @@ class ColemanHodgdonModel(HysteresisModel):
     # -- fitting ------------------------------------------------------------------------
     def fit(self, u: Any, y: Any, **fit_params: Any) -> ColemanHodgdonModel:
         """Identify A, B, C and the backlash origin from input u and output y."""
+        if fit_params:
+            raise HysteresisError(
+                f"ColemanHodgdonModel.fit takes no extra arguments: {sorted(fit_params)}")
         uu, yy = check_pair(u, y)
         if uu.size < 10:
             raise HysteresisError(f"need at least 10 samples to fit Coleman-Hodgdon, got {uu.size}")

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from hysteresis.base import family_names, make_family
+from hysteresis.base import HysteresisError, NotFittedError, family_names, make_family
 
 T = np.arange(0.0, 20.0, 0.02)
 U = 3.0 * np.sin(2 * np.pi * 0.25 * T) * np.exp(-T / 15.0)
@@ -43,3 +43,30 @@ def test_stepping_equals_the_record(fitted: Any) -> None:
         y_k, state = fitted.step(float(u_k), state)
         ys.append(y_k)
     np.testing.assert_allclose(ys, whole, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", family_names())
+def test_an_unknown_fit_argument_is_refused(name: str) -> None:
+    with pytest.raises(HysteresisError, match="takes"):
+        make_family(name).fit(U, Y, bogus=1)
+
+
+@pytest.mark.parametrize("name", family_names())
+def test_a_failed_fit_leaves_the_model_unfitted(name: str) -> None:
+    model = make_family(name).fit(U, Y)
+    assert model.is_fitted
+    bad = Y.copy()
+    bad[100] = np.nan
+    with pytest.raises(HysteresisError):
+        model.fit(U, bad)
+    # no parameters of the earlier fit left to pass for a fit of the new data
+    assert not model.is_fitted and model.fitted_attributes() == {}
+    with pytest.raises(NotFittedError):
+        model.predict(U)
+
+
+def test_a_preisach_fit_that_fails_midway_leaves_no_plane() -> None:
+    model = make_family("preisach")
+    with pytest.raises(HysteresisError, match="no positive density"):
+        model.fit(U, -Y)  # an output that falls as the input rises: no positive density
+    assert not model.is_fitted
