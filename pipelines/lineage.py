@@ -26,6 +26,7 @@ from typing import Any
 import pandas as pd
 
 from pipelines import cache
+from pipelines.tracking import finite_or_none as _num
 
 log = logging.getLogger(__name__)
 
@@ -89,14 +90,6 @@ def run_lineage(processed: Path, dataset: pd.DataFrame | None = None, *,
             raw_hash=str(meta.get("source_hash") or "unknown"),
             raw_source=str(meta.get("source_path") or processed))
     return out
-
-
-def _num(value: Any) -> float | None:
-    try:
-        f = float(value)
-    except (TypeError, ValueError):
-        return None
-    return None if f != f else f
 
 
 def _label(rig: str, phi: float | None, r: float | None) -> str:

@@ -324,8 +324,8 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
         from pipelines import lineage
 
         lineage.log_model_inputs(tracker, ids, fits, metrics, processed=paths.processed)
-        labels = [Configuration(str(r["rig"]), tracking._num(r["curve_angle_deg"]),
-                                tracking._num(r["radius_mm"])).label
+        labels = [Configuration(str(r["rig"]), tracking.finite_or_none(r["curve_angle_deg"]),
+                                tracking.finite_or_none(r["radius_mm"])).label
                   for r in fits.to_dict("records")]
         state.children = list(zip(ids, labels, strict=True))
     state.seconds = time.perf_counter() - start

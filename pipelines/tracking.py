@@ -500,8 +500,8 @@ def log_model_runs(
         records = tqdm(records, total=len(fits), desc="mlflow", unit="run")
     with tempfile.TemporaryDirectory(prefix=staging_prefix()) as tmp:
         for i, fit in enumerate(records):
-            config = Configuration(str(fit["rig"]), _num(fit["curve_angle_deg"]),
-                                   _num(fit["radius_mm"]))
+            config = Configuration(str(fit["rig"]), finite_or_none(fit["curve_angle_deg"]),
+                                   finite_or_none(fit["radius_mm"]))
             failed = _present(fit.get("error"))
             mine = by_model.get(_model_key(fit["family"], config.rig, config.curve_angle_deg,
                                            config.radius_mm, fit["fit_excitation"]))
@@ -556,7 +556,7 @@ def log_model_runs(
 
 
 def _model_key(family: Any, rig: Any, phi: Any, radius: Any, fit_exc: Any) -> tuple[Any, ...]:
-    return (str(family), str(rig), _num(phi), _num(radius), str(fit_exc))
+    return (str(family), str(rig), finite_or_none(phi), finite_or_none(radius), str(fit_exc))
 
 
 def _present(value: Any) -> bool:
@@ -565,7 +565,8 @@ def _present(value: Any) -> bool:
         and value is not pd.NA
 
 
-def _num(value: Any) -> float | None:
+def finite_or_none(value: Any) -> float | None:
+    """``value`` as a float, or None when it is missing, not a number or NaN."""
     try:
         f = float(value)
     except (TypeError, ValueError):
