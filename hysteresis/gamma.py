@@ -1,10 +1,23 @@
 """Complex hysteresis operator Gamma_n of seed 001 (eq. 4.7-4.10): weighted discrete play operators.
 
 ``y(k) = offset + sum_i q_i gamma_i[v(k), w_i(k-1), p_i]`` with preassigned thresholds
-``P = (p_1..p_n)`` (default 0, 0.2, ..., 2.0 input units) and zero initial state. The output is
-linear in ``Q``, so identification (eq. 4.10) is an exact least-squares problem:
+``P = (p_1..p_n)``. The output is linear in ``Q``, so identification (eq. 4.10) is an exact
+least-squares problem.
 
-* ``constraint="sum_to_one"`` (default): minimise ``||A Q - y||^2`` subject to ``sum(Q) = 1``.
+Defaults are derived from the identification record, never from a unit: the thresholds span
+a fraction of the input's peak-to-peak range (the one of :data:`THRESHOLD_FRACTIONS` with the
+least squared error; 1/6 is the thesis' 0..2 mm on its +-6 mm record); the weights are
+non-negative with a free output offset (a sum-to-one constraint only makes sense when input and
+output share a unit and a unit gain; unconstrained weights turn negative and fit a lag or a
+sign flip as a "loop" that no inverse can use); and every play starts at the first input, at
+the place in its band (just came down, at rest in the middle, just came up, or between) that
+fits the identification record best: a record that starts mid-stroke is not read as a jump from
+zero, and a rig that always starts its records the same way is predicted from that start.
+The thesis' exact setting is ``max_threshold=2.0, constraint="sum_to_one", fit_offset=False,
+start_state="zero"``.
+
+* ``constraint="nonneg"`` (default): ``Q >= 0`` (bounded-variable least squares).
+* ``constraint="sum_to_one"``: minimise ``||A Q - y||^2`` subject to ``sum(Q) = 1``.
   Eq. 4.10 writes the constraint as ``Q Q^T = 1``, but the text says it is the *sum* of the
   weights; we follow the text. The KKT system is solved exactly through the null space of the
   constraint (no iterative optimiser, so no early stop: Table 4.1's vectors sum to
@@ -25,7 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.optimize import lsq_linear, minimize_scalar
 
 from hysteresis._blas import single_thread_blas
 from hysteresis.base import (
@@ -45,8 +58,16 @@ from hysteresis.play import (
     play_matrix,
 )
 
-CONSTRAINTS = ("sum_to_one", "free")
+CONSTRAINTS = ("nonneg", "free", "sum_to_one")
 INVERSE_METHODS = ("exact", "bounded")
+START_STATES = ("fit", "rest", "zero")
+#: Where in its band every play starts with ``start_state="fit"``: ``w = u0 - position p``
+#: (0: the input just came down to ``u0``; 1/2: at rest in the middle; 1: it just came up).
+START_POSITIONS = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: Relative drop in squared error a start position other than 0 must bring to be chosen.
+START_GAIN = 0.05
+#: Candidate widest thresholds, as fractions of the identification input's peak-to-peak range.
+THRESHOLD_FRACTIONS = (1.0 / 12.0, 1.0 / 6.0, 1.0 / 3.0, 1.0 / 2.0)
 
 
 @dataclass
@@ -69,64 +90,115 @@ class GammaModel(StatefulModel):
     ----------
     n_operators, max_threshold:
         Thresholds ``P = linspace(0, max_threshold, n_operators)`` (seed 001: 11 and 2.0 mm).
+        ``max_threshold=None``: derived from the identification input (module docstring).
     thresholds:
         Explicit thresholds (overrides the two above); non-negative, distinct.
     constraint:
-        ``"sum_to_one"`` (seed 001 eq. 4.10 as the text means it) or ``"free"``.
+        ``"nonneg"`` (``Q >= 0``), ``"free"`` or ``"sum_to_one"`` (seed 001 eq. 4.10 as the
+        text means it).
     fit_offset:
-        Also fit a constant output offset (not in the thesis; off by default).
+        Also fit a constant output offset (not in the thesis).
+    start_state:
+        ``"fit"``: every play at ``w = u0 - position p`` at the first input ``u0``, the
+        position (:data:`START_POSITIONS`) fitted on the identification record
+        (``start_position_``) and used for every prediction from rest; ``"rest"``: position
+        1/2 (centred); ``"zero"``: the thesis' ``W(0) = 0`` whatever the first input.
     inverse_method:
         ``"exact"`` (breakpoint walk) or ``"bounded"`` (the thesis' bounded scalar search).
     search_radius:
         Half-width of the bounded search interval around the previous input, in input units
         (``None``: ``max(P)`` plus twice the output step divided by ``sum(Q)``).
     xatol:
-        Absolute input tolerance of the bounded search.
+        Input tolerance of the bounded search (``None``: 1e-10 of the identification input's
+        range, so it means the same in any unit).
     """
 
     def __init__(
         self,
         *,
         n_operators: int = 11,
-        max_threshold: float = 2.0,
+        max_threshold: float | None = None,
         thresholds: list[float] | None = None,
-        constraint: str = "sum_to_one",
-        fit_offset: bool = False,
+        constraint: str = "nonneg",
+        fit_offset: bool = True,
+        start_state: str = "fit",
         inverse_method: str = "exact",
         search_radius: float | None = None,
-        xatol: float = 1e-9,
+        xatol: float | None = None,
     ) -> None:
         self.n_operators = n_operators
         self.max_threshold = max_threshold
         self.thresholds = thresholds
         self.constraint = constraint
         self.fit_offset = fit_offset
+        self.start_state = start_state
         self.inverse_method = inverse_method
         self.search_radius = search_radius
         self.xatol = xatol
 
     # -- hyper-parameters -------------------------------------------------------------
-    def _thresholds(self) -> FloatArray:
+    def _threshold_candidates(self, uu: FloatArray) -> list[FloatArray]:
+        """The threshold vectors to try: the given ones, or one per derived span."""
         if self.thresholds is not None:
             p = np.asarray(list(self.thresholds), dtype=np.float64)
-        else:
-            if int(self.n_operators) < 1:
-                raise HysteresisError(f"n_operators must be >= 1, got {self.n_operators}")
+            return [_check_thresholds(p)]
+        if int(self.n_operators) < 1:
+            raise HysteresisError(f"n_operators must be >= 1, got {self.n_operators}")
+        if self.max_threshold is not None:
             if not self.max_threshold >= 0:
                 raise HysteresisError(f"max_threshold must be >= 0, got {self.max_threshold}")
-            p = np.linspace(0.0, float(self.max_threshold), int(self.n_operators))
-        if p.ndim != 1 or p.size == 0 or not np.all(np.isfinite(p)) or np.any(p < 0):
-            raise HysteresisError(f"thresholds must be finite and >= 0, got {p.tolist()}")
-        if np.unique(p).size != p.size:
-            raise HysteresisError(f"thresholds must be distinct, got {p.tolist()}")
-        return p
+            tops = [float(self.max_threshold)]
+        else:
+            span = float(np.ptp(uu))
+            if not span > 0:
+                raise HysteresisError("the identification input is constant: no threshold "
+                                      "can be derived from it; give max_threshold")
+            tops = [f * span for f in THRESHOLD_FRACTIONS]
+        return [_check_thresholds(np.linspace(0.0, top, int(self.n_operators))) for top in tops]
+
+    def play_setup(self, u: Any, y: Any = None) -> tuple[FloatArray, float]:
+        """(thresholds, start position) a fit on ``(u, y)`` uses: the fitted ones; else the
+        candidate pair with the least squared error. Without ``y``: the widest play at 1/6 of
+        the input's range (the thesis' proportion) and the first start position."""
+        if hasattr(self, "thresholds_"):
+            return self.thresholds_, float(getattr(self, "start_position_", 0.5))
+        if y is None:
+            cands = self._threshold_candidates(as_1d(u, "u"))
+            p = cands[THRESHOLD_FRACTIONS.index(1.0 / 6.0)] if len(cands) > 1 else cands[0]
+            return p, self._positions()[0]
+        best = self._best_fit(*check_pair(u, y))
+        return best[1], best[4]
+
+    def start_outputs(self, u0: float, p: Any, position: float | None = None) -> FloatArray:
+        """Every play's output before the first sample ``u0`` (see ``start_state``)."""
+        return self._start(float(u0), np.asarray(p, dtype=np.float64), position)
+
+    def _positions(self) -> tuple[float, ...]:
+        """The start positions a fit tries (one unless ``start_state="fit"``)."""
+        if self.start_state not in START_STATES:
+            raise HysteresisError(
+                f"start_state must be one of {START_STATES}, got {self.start_state!r}")
+        if self.start_state == "fit":
+            return START_POSITIONS
+        return (0.5,)
+
+    def _start(self, u0: float, p: FloatArray, position: float | None = None) -> FloatArray:
+        """Every play's output before the first sample ``u0`` (see ``start_state``)."""
+        if self.start_state == "zero":
+            return np.zeros(p.size)
+        if position is None:
+            position = float(getattr(self, "start_position_", self._positions()[0]))
+            if self.start_state == "rest":
+                position = 0.5
+        return u0 - position * p
 
     # -- identification ---------------------------------------------------------------
-    def design_matrix(self, u: Any) -> FloatArray:
-        """Play-operator outputs (one column per threshold) over ``u`` from the zero state."""
+    def design_matrix(self, u: Any, y: Any = None) -> FloatArray:
+        """Play-operator outputs (one column per threshold) over ``u`` from the initial state:
+        the fitted thresholds and start, else :meth:`play_setup` ``(u, y)``."""
         uu = as_1d(u, "u")
-        p = self.thresholds_ if hasattr(self, "thresholds_") else self._thresholds()
-        a, _ = play_matrix(uu, p, np.zeros(p.size))
+        p, pos = self.play_setup(uu, y)
+        a, _ = play_matrix(uu, p, self._start(float(uu[0]), p, pos))
         return np.asarray(a)
 
     def fit(self, u: Any, y: Any, **fit_params: Any) -> GammaModel:
@@ -138,43 +210,67 @@ class GammaModel(StatefulModel):
                 f"constraint must be one of {CONSTRAINTS}, got {self.constraint!r}"
             )
         uu, yy = check_pair(u, y)
-        p = self._thresholds()
-        a, _ = play_matrix(uu, p, np.zeros(p.size))
+        sse, p, x, lam, pos = self._best_fit(uu, yy)
         n = p.size
-        if self.fit_offset:
-            a = np.column_stack([a, np.ones(uu.size)])
-        c = np.zeros(a.shape[1])
-        c[:n] = 1.0  # constraint row: sum of the weights (the offset is not constrained)
-        if a.shape[0] < a.shape[1]:
-            raise HysteresisError(f"need at least {a.shape[1]} samples to fit, got {a.shape[0]}")
-        # tiny dense problem: BLAS threads only add contention (fits run in parallel)
-        with single_thread_blas():
-            if self.constraint == "free":
-                x, *_ = np.linalg.lstsq(a, yy, rcond=None)
-                lam = float("nan")
-            else:
-                x, lam = constrained_lstsq(a, yy, c, 1.0)
-        resid = a @ x - yy
+        self.start_position_ = pos
         self.thresholds_ = p
         self.weights_ = np.ascontiguousarray(x[:n])
         self.offset_ = float(x[n]) if self.fit_offset else 0.0
         self.lagrange_multiplier_ = lam
-        self.sse_ = float(resid @ resid)
+        self.sse_ = sse
         self.n_samples_ = int(uu.size)
+        self.input_span_ = float(np.ptp(uu))
         return self
+
+    def _best_fit(self, uu: FloatArray, yy: FloatArray
+                  ) -> tuple[float, FloatArray, FloatArray, float, float]:
+        """(SSE, thresholds, solution, multiplier, start position) of the best candidate.
+
+        A start position other than the first (the thesis' convention) must lower the squared
+        error by :data:`START_GAIN`: a clean record that starts where the thesis assumes keeps
+        it, so the fits of a campaign's shapes stay comparable (the shape-aware model regresses
+        their weights), while a record that clearly starts elsewhere gets its own start.
+        """
+        best: tuple[float, FloatArray, FloatArray, float, float] | None = None
+        for p in self._threshold_candidates(uu):
+            fits = []
+            for pos in self._positions():
+                plays = play_matrix(uu, p, self._start(float(uu[0]), p, pos))[0]
+                x, lam = self._solve(plays, yy)
+                resid = self._design(plays) @ x - yy
+                fits.append((float(resid @ resid), p, x, lam, pos))
+            choice = min(fits, key=lambda f: f[0])
+            if choice[0] > (1.0 - START_GAIN) * fits[0][0]:
+                choice = fits[0]
+            if best is None or choice[0] < best[0]:
+                best = choice
+        assert best is not None  # at least one candidate
+        return best
+
+    def _design(self, plays: Any) -> FloatArray:
+        a = np.asarray(plays)
+        return np.column_stack([a, np.ones(a.shape[0])]) if self.fit_offset else a
+
+    def _solve(self, plays: Any, yy: FloatArray) -> tuple[FloatArray, float]:
+        """Exact (constrained) least squares for ``Q`` (and the offset) on one play matrix."""
+        a = self._design(plays)
+        if a.shape[0] < a.shape[1]:
+            raise HysteresisError(f"need at least {a.shape[1]} samples to fit, got {a.shape[0]}")
+        return solve_play_weights(a, yy, n_weights=np.asarray(plays).shape[1],
+                                  constraint=self.constraint)
 
     # -- simulation -------------------------------------------------------------------
     def initial_state(self, u0: float = 0.0) -> GammaState:
-        """The identification state, every operator at zero (seed 001 ``W_{k-1}(1) = 0``),
-        after the input ``u0`` is applied once (for ``u0 = 0`` the zero state itself)."""
+        """The identification state at the input ``u0``: every play at rest centred on ``u0``,
+        or (``start_state="zero"``) seed 001's ``W = 0`` after ``u0`` is applied once."""
         self.check_fitted()
         v = float(u0)
-        w = np.minimum(v, np.maximum(v - self.thresholds_, 0.0))
+        w = np.minimum(v, np.maximum(v - self.thresholds_, self._start(v, self.thresholds_)))
         return GammaState(w, v)
 
-    def _state(self, state: Any) -> GammaState:
+    def _state(self, state: Any, u0: float = 0.0) -> GammaState:
         if state is None:
-            return self.initial_state()
+            return self.initial_state(u0)
         if isinstance(state, GammaState):
             st = state.copy()
         else:
@@ -188,10 +284,11 @@ class GammaModel(StatefulModel):
     def predict(
         self, u: Any, *, state: Any = None, return_state: bool = False
     ) -> Any:
-        """Simulate from the zero state (or ``state``); with ``return_state`` also the end state."""
+        """Simulate from the rest state at ``u[0]`` (or ``state``); ``return_state``: also the
+        end state."""
         self.check_fitted()
         uu = as_1d(u, "u")
-        st = self._state(state)
+        st = self._state(state, float(uu[0]))
         y, w = gamma_simulate(uu, self.thresholds_, self.weights_, self.offset_, st.w)
         if return_state:
             return y, GammaState(w, float(uu[-1]))
@@ -200,7 +297,7 @@ class GammaModel(StatefulModel):
     def step(self, u_k: float, state: Any = None) -> tuple[float, GammaState]:
         """One forward step: ``(y_k, state_k)`` from ``u_k`` and ``state_{k-1}`` (not modified)."""
         self.check_fitted()
-        st = self._state(state)
+        st = self._state(state, float(u_k))
         v = float(u_k)
         w = np.minimum(v, np.maximum(v - self.thresholds_, st.w))
         return self.offset_ + float(self.weights_ @ w), GammaState(w, v)
@@ -215,6 +312,10 @@ class GammaModel(StatefulModel):
         given one is not modified.
         """
         self.check_fitted()
+        if state is None and self.start_state != "zero":
+            # from the start state the output is affine in the input: start where it is y_k
+            v = self._rest_input(float(y_k))
+            return v, self.initial_state(v)
         st = self._state(state)
         meth = method or self.inverse_method
         p, q, off = self.thresholds_, self.weights_, self.offset_
@@ -243,9 +344,23 @@ class GammaModel(StatefulModel):
             rad = float(p.max()) + 2.0 * gap / max(abs(float(q.sum())), 1e-3) + 1e-6
         res = minimize_scalar(
             err2, bounds=(st.u - rad, st.u + rad), method="bounded",
-            options={"xatol": float(self.xatol)},
+            options={"xatol": self._xatol()},
         )
         return float(res.x)
+
+    def _rest_input(self, y0: float) -> float:
+        """The input whose start output is ``y0`` (where an inverse from rest starts)."""
+        total = float(self.weights_.sum())
+        if abs(total) < 1e-12:
+            return 0.0
+        start_at_zero = self.offset_ + float(self.weights_ @ self._start(0.0, self.thresholds_))
+        return (y0 - start_at_zero) / total
+
+    def _xatol(self) -> float:
+        if self.xatol is not None:
+            return float(self.xatol)
+        span = float(getattr(self, "input_span_", 0.0)) or float(self.thresholds_.max()) or 1.0
+        return 1e-10 * span
 
     def invert(
         self, y_desired: Any, *, state: Any = None, method: str | None = None,
@@ -255,21 +370,59 @@ class GammaModel(StatefulModel):
         self.check_fitted()
         yd = as_1d(y_desired, "y_desired")
         check_inverse_reach(self, desired=yd)
-        st = self._state(state)
         meth = method or self.inverse_method
-        if meth == "exact":
+        if meth not in INVERSE_METHODS:
+            raise HysteresisError(f"inverse method must be one of {INVERSE_METHODS}, got {meth!r}")
+        head: list[float] = []
+        if state is None and self.start_state != "zero":
+            u0, st = self.invert_step(float(yd[0]))
+            head, yd = [u0], yd[1:]
+        else:
+            st = self._state(state)
+        if yd.size == 0:
+            u, end = np.empty(0), st
+        elif meth == "exact":
             u, w, v = gamma_invert_sequence(
                 yd, self.thresholds_, self.weights_, self.offset_, st.w, st.u
             )
             end = GammaState(w, float(v))
-        elif meth == "bounded":
+        else:
             u = np.empty(yd.size)
             for k in range(yd.size):
                 u[k], st = self.invert_step(float(yd[k]), st, method="bounded")
             end = st
-        else:
-            raise HysteresisError(f"inverse method must be one of {INVERSE_METHODS}, got {meth!r}")
+        u = np.concatenate([np.asarray(head, dtype=np.float64), u])
         return (u, end) if return_state else u
+
+
+def solve_play_weights(a: FloatArray, y: FloatArray, *, n_weights: int,
+                       constraint: str) -> tuple[FloatArray, float]:
+    """Least squares ``a x ~ y`` where the first ``n_weights`` columns are play operators:
+    their weights constrained as ``constraint`` says (the other columns are free). Returns the
+    solution and the sum-to-one Lagrange multiplier (NaN for the other constraints)."""
+    if constraint not in CONSTRAINTS:
+        raise HysteresisError(f"constraint must be one of {CONSTRAINTS}, got {constraint!r}")
+    # tiny dense problem: BLAS threads only add contention (fits run in parallel)
+    with single_thread_blas():
+        if constraint == "free":
+            x, *_ = np.linalg.lstsq(a, y, rcond=None)
+            return np.asarray(x, dtype=np.float64), float("nan")
+        if constraint == "nonneg":
+            lower = np.full(a.shape[1], -np.inf)
+            lower[:n_weights] = 0.0
+            res = lsq_linear(a, y, bounds=(lower, np.inf), method="bvls")
+            return np.asarray(res.x, dtype=np.float64), float("nan")
+        c = np.zeros(a.shape[1])
+        c[:n_weights] = 1.0  # the sum of the weights (other columns unconstrained)
+        return constrained_lstsq(a, y, c, 1.0)
+
+
+def _check_thresholds(p: FloatArray) -> FloatArray:
+    if p.ndim != 1 or p.size == 0 or not np.all(np.isfinite(p)) or np.any(p < 0):
+        raise HysteresisError(f"thresholds must be finite and >= 0, got {p.tolist()}")
+    if np.unique(p).size != p.size:
+        raise HysteresisError(f"thresholds must be distinct, got {p.tolist()}")
+    return p
 
 
 def constrained_lstsq(

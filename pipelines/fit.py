@@ -29,6 +29,7 @@ from pipelines.common import (
     dataset_hash,
     hydra_output_dir,
     hydra_sweep_dir,
+    identification_plan,
     read_processed,
     to_container,
 )
@@ -232,10 +233,10 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
     configs = stages.configurations(dataset, rig=sel.get("rig"),
                                     curve_angle_deg=sel.get("curve_angle_deg"),
                                     radius_mm=sel.get("radius_mm"))
-    tasks = stages.plan_fits(dataset, family_specs(cfg), configs,
-                             fit_excitations=list(cfg.get("fit_excitations", ["sine_decay"])),
-                             fit_runs=list(cfg.get("fit_runs") or []),
-                             input_col=input_col, output_col=output_col)
+    plan = identification_plan(cfg, dataset, paths)
+    tasks = stages.plan_fits(plan.dataset, family_specs(cfg), configs,
+                             fit_excitations=plan.fit_excitations, fit_runs=plan.chosen,
+                             marked=plan.marked, input_col=input_col, output_col=output_col)
     previous = load_models(paths.models) if cfg.get("cache", True) else None
     progress = bool(cfg.get("progress", False))
     n_jobs = int(cfg.get("n_jobs", 1))
@@ -287,9 +288,13 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
             base = tracking.flatten({k: v for k, v in plain.items()
                                      if k not in ("family", "family_overrides", "tracking")})
             hydra_dir = hydra_output_dir()
+            plan = identification_plan(plain, dataset, paths)
+            if plan.notes:
+                tracker.log_text(stage_run.parent_id, json.dumps(dict(plan.notes), indent=1),
+                                 "identification_plan.json")
             ids = tracking.log_model_runs(
                 tracker, stage_run.parent_id, fits=fits,
-                metrics=fit_metrics(fits, dataset, plain), base_params=base,
+                metrics=fit_metrics(fits, plan.dataset, plain), base_params=base,
                 tags={"dataset_hash": dataset_hash(paths.processed)},
                 hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, stage="fit",
             )

@@ -103,7 +103,8 @@ def stage_config(name: str, pipeline: Mapping[str, Any]) -> dict[str, Any]:
     cfg = compose_stage(name, stage_overrides(name, pipeline))
     cfg["paths"] = dict(pipeline["paths"])
     cfg["tracking"] = dict(pipeline.get("tracking") or {})
-    shared = ("config", "fit_excitations", "fit_runs", "signals", "n_jobs", "cache")
+    shared = ("config", "fit_excitations", "fit_runs", "single_run_heldout_fraction", "signals",
+              "n_jobs", "cache")
     if name in ("fit", "validate"):
         for key in shared:
             if key in pipeline:

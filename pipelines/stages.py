@@ -222,6 +222,115 @@ class FitTask:
     key: str
 
 
+#: Manifest ``excitation.role`` values that mark a run for identification / for judging only.
+IDENTIFY_ROLES = ("identify", "identification", "fit", "train")
+HELDOUT_ROLES = ("held_out", "heldout", "validation", "test")
+#: Suffix of the held-out tail of a configuration recorded in one run.
+TAIL = ".tail"
+
+
+@dataclass(frozen=True)
+class IdentificationPlan:
+    """Which data identifies and which judges, decided once for fit and validate alike.
+
+    ``dataset`` is the processed dataset with single-run configurations split in time;
+    ``fit_excitations``/``heldout`` are the configured lists extended by what the rule added;
+    ``chosen`` are run ids that identify (``fit_runs`` plus manifest roles); ``notes`` say,
+    per configuration the rule touched, what it did (for the log and MLflow).
+    """
+
+    dataset: pd.DataFrame
+    fit_excitations: tuple[str, ...]
+    heldout: tuple[str, ...]
+    chosen: frozenset[str]
+    notes: Mapping[str, str]
+    #: Runs a manifest marks for identification: their configurations identify on them only.
+    marked: frozenset[str] = frozenset()
+
+
+def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str],
+                        heldout: Sequence[str], fit_runs: Sequence[str] = (),
+                        roles: Mapping[str, str] | None = None,
+                        single_run_heldout_fraction: float = 0.3) -> IdentificationPlan:
+    """The documented rule (docs/pipeline.md, "Which run identifies"), per configuration:
+
+    1. runs whose manifest says ``excitation.role: identify`` (or named in ``fit_runs``);
+    2. else runs of the ``fit_excitations`` kinds;
+    3. else, for a configuration recorded in one run only, the run's head identifies and its
+       last ``single_run_heldout_fraction`` (excitation ``<kind>.tail``) is held out.
+
+    Runs marked held-out by their manifest never identify. A configuration the rule cannot
+    decide is left to :func:`identification_run`, whose error names the option to set.
+    """
+    roles = {str(k): str(v).lower() for k, v in (roles or {}).items() if v}
+    if not 0.05 <= single_run_heldout_fraction <= 0.5:
+        raise PipelineError("single_run_heldout_fraction must be in [0.05, 0.5], got "
+                            f"{single_run_heldout_fraction}")
+    fit_kinds, held_kinds = list(fit_excitations), list(heldout)
+    configured = set(fit_kinds)
+    chosen = set(map(str, fit_runs))
+    all_marked: set[str] = set()
+    notes: dict[str, str] = {}
+    pieces: list[pd.DataFrame] = []
+    keys = ["rig", "curve_angle_deg", "radius_mm"]
+    for key, rows in dataset.groupby(keys, sort=True, dropna=False, observed=True):
+        label = Configuration(str(key[0]), _num(key[1]), _num(key[2])).label
+        by_run = {str(r): g for r, g in rows.groupby("run_id", sort=True, observed=True)}
+        marked = [r for r in by_run if roles.get(r) in IDENTIFY_ROLES]
+        if marked:
+            chosen.update(marked)
+            all_marked.update(marked)
+            for r in marked:
+                kind = str(by_run[r]["excitation"].iloc[0])
+                if kind not in fit_kinds:
+                    fit_kinds.append(kind)
+            notes[label] = f"manifest role identify: {', '.join(marked)}"
+            pieces.append(rows)
+            continue
+        usable = [r for r in by_run if roles.get(r) not in HELDOUT_ROLES]
+        has_kind = any(str(by_run[r]["excitation"].iloc[0]) in configured for r in usable)
+        if has_kind or len(by_run) != 1 or not usable or chosen.intersection(by_run):
+            pieces.append(rows)
+            continue
+        (run_id, run), = by_run.items()
+        run = run.sort_values("t_s", kind="stable")
+        kind = str(run["excitation"].iloc[0])
+        cut = int(round(len(run) * (1.0 - single_run_heldout_fraction)))
+        if cut < 20 or len(run) - cut < 20:
+            pieces.append(rows)
+            continue
+        head, tail = run.iloc[:cut].copy(), run.iloc[cut:].copy()
+        tail["run_id"] = run_id + TAIL
+        tail["excitation"] = kind + TAIL
+        pieces += [head, tail]
+        if kind not in fit_kinds:
+            fit_kinds.append(kind)
+        if kind + TAIL not in held_kinds:
+            held_kinds.append(kind + TAIL)
+        t = run["t_s"].to_numpy(dtype=np.float64)
+        notes[label] = (f"one run ({run_id}): identifies on its first {t[cut] - t[0]:.1f} s, "
+                        f"judged on its last {t[-1] - t[cut]:.1f} s "
+                        f"({100 * single_run_heldout_fraction:.0f} %, excitation "
+                        f"{kind + TAIL!r})")
+    out = pd.concat(pieces, ignore_index=True) if pieces else dataset
+    for col in ("run_id", "excitation"):
+        if isinstance(dataset[col].dtype, pd.CategoricalDtype):
+            out[col] = out[col].astype(str)
+    return IdentificationPlan(out, tuple(fit_kinds), tuple(held_kinds), frozenset(chosen),
+                              notes, frozenset(all_marked))
+
+
+def manifest_roles(runs_meta: Mapping[str, Mapping[str, Any]]) -> dict[str, str]:
+    """``run_id -> excitation.role`` from ingest's ``runs.json`` (runs without one omitted)."""
+    out: dict[str, str] = {}
+    for run_id, meta in runs_meta.items():
+        exc = (meta.get("manifest") or {}).get("excitation") or meta.get("excitation") or {}
+        role = exc.get("role") if isinstance(exc, Mapping) else None
+        if role:
+            out[str(run_id)] = str(role).lower()
+    return out
+
+
 def identification_run(runs: Sequence[RunSignal], chosen: set[str], *,
                        label: str) -> RunSignal:
     """The run a configuration identifies on: the only candidate, or the one in ``chosen``.
@@ -250,7 +359,8 @@ def plan_fits(
     configs: Sequence[Configuration],
     *,
     fit_excitations: Sequence[str],
-    fit_runs: Sequence[str] = (),
+    fit_runs: Sequence[str] | frozenset[str] = (),
+    marked: frozenset[str] = frozenset(),
     input_col: str = "input",
     output_col: str = "output",
 ) -> list[FitTask]:
@@ -267,15 +377,21 @@ def plan_fits(
     for config in configs:
         by_kind = run_signals(config_rows(dataset, config), input_col=input_col,
                               output_col=output_col)
+        own = {r.run_id for rs in by_kind.values() for r in rs} & set(marked)
         for kind in fit_excitations:
             runs = by_kind.get(kind)
+            if own:  # the manifest says which runs identify this configuration
+                runs = [r for r in runs or [] if r.run_id in own]
+                if not runs:
+                    continue
             if not runs:
                 warnings.warn(f"{config.label}: no {kind!r} run to identify on, skipped",
                               stacklevel=2)
                 continue
             run = identification_run(runs, chosen, label=f"{config.label} {kind!r}")
-            log.info("fit: %s identifies on %s (%s)", config.label, run.run_id,
-                     "named in fit_runs" if run.run_id in chosen else f"its only {kind} run")
+            why = ("its manifest role is identify" if run.run_id in own else
+                   "named in fit_runs" if run.run_id in chosen else f"its only {kind} run")
+            log.info("fit: %s identifies on %s (%s)", config.label, run.run_id, why)
             for fam in families:
                 key = cache.combine({
                     "stage": "fit", "family": fam.name, "config": dict(fam.config),

@@ -30,6 +30,7 @@ from pipelines.common import (
     dataset_hash,
     hydra_output_dir,
     hydra_sweep_dir,
+    identification_plan,
     read_processed,
     to_container,
 )
@@ -107,6 +108,8 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     clean_leftovers(paths.reports, recursive=False)
     if dataset is None:
         dataset = read_processed(paths.processed)
+    plan = identification_plan(cfg, dataset, paths)
+    dataset = plan.dataset
     sig = cfg.get("signals") or {}
     input_col, output_col = str(sig.get("input", "input")), str(sig.get("output", "output"))
     stages.check_dataset(dataset, signals=(input_col, output_col))
@@ -114,7 +117,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     configs = stages.configurations(dataset, rig=sel.get("rig"),
                                     curve_angle_deg=sel.get("curve_angle_deg"),
                                     radius_mm=sel.get("radius_mm"))
-    fit_excitations = list(cfg.get("fit_excitations", ["sine_decay"]))
+    fit_excitations = list(plan.fit_excitations)
     if fits is None:
         fits = load_models(paths.models)
     fits = select_fits(fits, configs, fit_excitations)
@@ -123,7 +126,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
             f"no fitted model for the selected configurations and fit excitations "
             f"{fit_excitations} under {paths.models}; run `make fit` first"
         )
-    heldout = list(cfg.get("heldout", ["triangle_decay", "trapezoid_decay"]))
+    heldout = list(plan.heldout)
     cross = bool(cfg.get("cross", False))
     settings = {"heldout": heldout, "cross": cross, "signals": [input_col, output_col]}
     use_cache = bool(cfg.get("cache", True))

@@ -427,11 +427,15 @@ class ComposedModel:
         u = self._input(run, f)
         if f is None:
             f = np.ones(run.n)
-        p = _gamma_thresholds(base)
+        if hasattr(self, "op_thresholds_"):
+            p, pos = self.op_thresholds_, self.op_start_position_
+        else:
+            p, pos = _gamma_setup(base, run)
         u0 = float(u[0])
+        start = base.start_outputs(u0, p, pos)  # type: ignore[attr-defined]
         cols = []
-        for pi in p:
-            w0 = min(u0, max(u0 - float(pi), 0.0))
+        for pi, si in zip(p, start, strict=True):
+            w0 = min(u0, max(u0 - float(pi), float(si)))
             cols.append(scaled_play(u, 0.5 * float(pi) * f, z0=w0 + 0.5 * float(pi))
                         - 0.5 * float(pi))
         a = np.column_stack(cols)
@@ -450,11 +454,13 @@ class ComposedModel:
 
     def _fit_operators(self, run: RunData) -> ComposedModel:
         """Exact (constrained) least squares of the speed-scaled Gamma and the features."""
-        from hysteresis.gamma import constrained_lstsq
+        from hysteresis.gamma import solve_play_weights
 
         base = self.base_factory()
+        for stale in ("op_thresholds_", "op_start_position_", "op_weights_"):
+            self.__dict__.pop(stale, None)
         a = self._scaled_design(run, base)
-        n_w = int(_gamma_thresholds(base).size)
+        n_w = int(_gamma_setup(base, run)[0].size)
         uses_base = any(t.effect.uses_base for t in self.terms if t.effect.n_linear > 0)
         yb = run.y
         x = np.zeros(a.shape[1])
@@ -462,15 +468,12 @@ class ComposedModel:
         for _ in range(self.iterations if uses_base else 1):
             phi = self._features(run, yb, coef)
             full = np.column_stack([a, phi])
-            if getattr(base, "constraint", "free") == "sum_to_one":
-                c = np.zeros(full.shape[1])
-                c[:n_w] = 1.0
-                x, _ = constrained_lstsq(full, run.y, c, 1.0)
-            else:
-                x = _lstsq(full, run.y)
+            x, _ = solve_play_weights(full, run.y, n_weights=n_w,
+                                      constraint=str(getattr(base, "constraint", "free")))
             yb = a @ x[: a.shape[1]]
             coef = x[a.shape[1]:]
         self.base_ = base
+        self.op_thresholds_, self.op_start_position_ = _gamma_setup(base, run)
         self.op_weights_ = np.asarray(x[: a.shape[1]], dtype=np.float64)
         self.coef_ = np.asarray(x[a.shape[1]:], dtype=np.float64)
         return self
@@ -564,17 +567,19 @@ class ComposedModel:
         return sum(t.effect.n_params for t in self.terms)
 
 
-def _gamma_thresholds(base: HysteresisModel) -> FloatArray:
-    """The (unfitted) Gamma base's play thresholds."""
-    thresholds = getattr(base, "_thresholds", None)
-    if thresholds is None:
+def _gamma_setup(base: HysteresisModel, run: RunData) -> tuple[FloatArray, float]:
+    """The Gamma base's play thresholds and start position on ``run``: those its own fit of
+    the run uses, so a term is compared with the base alone on the same plays."""
+    setup = getattr(base, "play_setup", None)
+    if setup is None:
         raise HysteresisError(f"{type(base).__name__} has no play-operator thresholds")
-    return np.asarray(thresholds(), dtype=np.float64)
+    p, pos = setup(run.u, run.y)
+    return np.asarray(p, dtype=np.float64), float(pos)
 
 
 def is_gamma(base: HysteresisModel) -> bool:
     """A Gamma-family base (play-operator design matrix, exact least-squares fit)?"""
-    return getattr(base, "family", "") == "gamma" and hasattr(base, "_thresholds")
+    return getattr(base, "family", "") == "gamma" and hasattr(base, "play_setup")
 
 
 def _joint_linear(base: HysteresisModel, u: FloatArray, y: FloatArray,
@@ -589,19 +594,15 @@ def _joint_linear(base: HysteresisModel, u: FloatArray, y: FloatArray,
     design = getattr(base, "design_matrix", None)
     if design is None or getattr(base, "family", "") != "gamma":
         return None
-    from hysteresis.gamma import constrained_lstsq
+    from hysteresis.gamma import solve_play_weights
 
-    a = np.asarray(design(u), dtype=np.float64)
+    a = np.asarray(design(u, y), dtype=np.float64)
     n_w = a.shape[1]
     if getattr(base, "fit_offset", False):
         a = np.column_stack([a, np.ones(u.size)])
     full = np.column_stack([a, phi])
-    if getattr(base, "constraint", "free") == "sum_to_one":
-        c = np.zeros(full.shape[1])
-        c[:n_w] = 1.0
-        x, _ = constrained_lstsq(full, y, c, 1.0)
-    else:
-        x = _lstsq(full, y)
+    x, _ = solve_play_weights(full, y, n_weights=n_w,
+                              constraint=str(getattr(base, "constraint", "free")))
     return np.asarray(x[a.shape[1]:], dtype=np.float64)
 
 

@@ -96,7 +96,10 @@ def plant(family: str) -> HysteresisModel:
     t = np.arange(0.0, 60.0, 1.0 / RATE_HZ)
     u = 6.0 * np.sin(2 * np.pi * 0.1 * t) * np.clip(t / 10.0, 0.0, 1.0)
     y = _reference_loop(u)
-    params: dict[str, Any] = {"gamma": {"n_operators": 7, "max_threshold": 2.0},
+    # the thesis' own Gamma setting: a plant fixed once, whatever the family's defaults
+    params: dict[str, Any] = {"gamma": {"n_operators": 7, "max_threshold": 2.0,
+                                        "constraint": "sum_to_one", "fit_offset": False,
+                                        "start_state": "zero"},
                               "preisach": {}, "bouc_wen": {}}.get(family, {})
     if family not in PLANTS:
         raise HysteresisError(f"unknown plant {family!r}; known: {', '.join(PLANTS)}")

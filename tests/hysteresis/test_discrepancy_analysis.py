@@ -288,7 +288,8 @@ def test_rate_dependence_scales_a_gamma_bases_play_operators():
     t, u = sine_decay()
     probe = RunData(run_id="p", t=t, u=u, y=u)
     eff = candidate("rate_dependence")
-    gamma = lambda: make_family("gamma", thresholds=[0.0, 0.6, 2.0])  # noqa: E731
+    gamma = lambda: make_family("gamma", thresholds=[0.0, 0.6, 2.0],  # noqa: E731
+                                fit_offset=False)
     grid = eff.operator_grid(probe)
     v0 = grid[5][1]
     zero = ComposedModel(gamma, [Term(eff, (1.0, v0, 0.0))])
