@@ -167,7 +167,7 @@ def _write_table(frame: pd.DataFrame, base: Path, *, csv: bool = True) -> list[P
     if csv:
         flat = frame.copy()
         for col in flat.columns:
-            if flat[col].map(lambda v: isinstance(v, list)).any():
+            if any(isinstance(v, list) for v in flat[col]):
                 flat[col] = flat[col].map(json.dumps)
         with atomic_path(base.with_suffix(".csv")) as tmp:
             flat.to_csv(tmp, index=False)

@@ -39,6 +39,7 @@ from pipelines.common import (
     Paths,
     dataset_hash,
     hydra_output_dir,
+    identification_plan,
     read_processed,
     to_container,
 )
@@ -98,6 +99,15 @@ def stage_overrides(name: str, pipeline: Mapping[str, Any]) -> list[str]:
             *list((pipeline.get("overrides") or {}).get(name) or [])]
 
 
+def _identified(plan: Any, pipeline: Mapping[str, Any]) -> str:
+    """The excitation the models of this pipeline identify on: the first configured one, or,
+    when the data has none of those, the first the identification rule added."""
+    configured = list(pipeline.get("fit_excitations") or ["sine_decay"])
+    added = [k for k in plan.fit_excitations if k not in configured]
+    present = set(plan.dataset["excitation"].astype(str))
+    return str(configured[0] if configured[0] in present or not added else added[0])
+
+
 def stage_config(name: str, pipeline: Mapping[str, Any]) -> dict[str, Any]:
     """``conf/<name>.yaml`` + ``overrides.<name>`` + the pipeline's shared values."""
     cfg = compose_stage(name, stage_overrides(name, pipeline))
@@ -113,15 +123,19 @@ def stage_config(name: str, pipeline: Mapping[str, Any]) -> dict[str, Any]:
         for key in ("heldout", "cross"):
             if key in pipeline:
                 cfg[key] = pipeline[key]
+    # what the identification rule decided (run_pipeline sets it from the fit stage's plan)
+    identified = pipeline.get("identified_excitation") or \
+        list(pipeline.get("fit_excitations") or ["sine_decay"])[0]
     if name == "unseen_shape":
-        cfg["fit_excitation"] = list(pipeline.get("fit_excitations") or ["sine_decay"])[0]
+        cfg["fit_excitation"] = identified
         for key in ("config", "signals", "n_jobs", "cache"):
             if key in pipeline:
                 cfg[key] = pipeline[key]
-        if pipeline.get("heldout"):
-            cfg["eval_excitations"] = list(pipeline["heldout"])
+        heldout = pipeline.get("planned_heldout") or pipeline.get("heldout")
+        if heldout:
+            cfg["eval_excitations"] = list(heldout)
     if name == "report":
-        cfg["fit_excitation"] = list(pipeline.get("fit_excitations") or ["sine_decay"])[0]
+        cfg["fit_excitation"] = identified
         for key in ("n_jobs", "cache"):
             if key in pipeline:
                 cfg[key] = pipeline[key]
@@ -211,11 +225,17 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
         result.ingest_report = run_ingest_stage(cfg)
         result.timings["ingest"] = time.perf_counter() - t0
 
-    dataset = None
+    dataset = planned = None
     if any(s in wanted for s in ("fit", "validate", "unseen_shape")):
         t0 = time.perf_counter()
         dataset = read_processed(paths.processed)
         result.timings["read_dataset"] = time.perf_counter() - t0
+    if dataset is not None:
+        # the identification rule, as fit and validate apply it, for the later stages
+        plan = identification_plan(stage_config("validate", cfg), dataset, paths)
+        cfg = {**cfg, "identified_excitation": _identified(plan, cfg),
+               "planned_heldout": list(plan.heldout)}
+        planned = plan.dataset
     if "fit" in wanted:
         t0 = time.perf_counter()
         result.fits = fit.run(stage_config("fit", cfg), dataset=dataset)
@@ -229,7 +249,7 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
     if "unseen_shape" in wanted:
         t0 = time.perf_counter()
         result.unseen_shape = unseen_shape.run(stage_config("unseen_shape", cfg),
-                                               dataset=dataset, fits=result.fits)
+                                               dataset=planned, fits=result.fits)
         result.timings["unseen_shape"] = time.perf_counter() - t0
     # MLflow's child runs are logged in a background thread while the report draws (its
     # figures render in worker processes); the figures are attached to the runs afterwards.

@@ -12,6 +12,7 @@ the runs of the same configuration; the metrics table has one row per
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
@@ -168,6 +169,18 @@ class RunSignal:
     u: np.ndarray
     y: np.ndarray
     data_hash: str
+    #: The input before this record, when it is the held-out tail of a run: a model is run
+    #: through it first, so the tail is predicted from the state the head left (the input is
+    #: known; no output of the tail is used).
+    lead_in: np.ndarray | None = None
+
+    def predict(self, model: Any) -> np.ndarray:
+        """``model``'s prediction of this record (from rest, or after its lead-in)."""
+        if self.lead_in is None or self.lead_in.size == 0:
+            return np.asarray(model.predict(self.u), dtype=np.float64)
+        full = np.asarray(model.predict(np.concatenate([self.lead_in, self.u])),
+                          dtype=np.float64)
+        return full[self.lead_in.size:]
 
 
 def run_signals(
@@ -193,6 +206,12 @@ def run_signals(
         out.setdefault(kind, []).append(
             RunSignal(str(run_id), kind, t, u, y, cache.hash_arrays(t, u, y))
         )
+    heads = {r.run_id: r for runs in out.values() for r in runs}
+    for runs in out.values():
+        for i, r in enumerate(runs):
+            head = heads.get(r.run_id.removesuffix(TAIL)) if r.run_id.endswith(TAIL) else None
+            if head is not None:
+                runs[i] = dataclasses.replace(r, lead_in=head.u)
     return out
 
 
@@ -551,7 +570,7 @@ def evaluate_configuration(
                 for run in signals[kind]:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
-                        yhat = np.asarray(model.predict(run.u), dtype=np.float64)
+                        yhat = run.predict(model)
                     measured.append(run.y)
                     predicted.append(yhat)
                     pred_frames.append(pd.DataFrame({

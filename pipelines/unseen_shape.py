@@ -81,7 +81,7 @@ def _rmse(model: HysteresisModel, runs: Sequence[RunSignal]) -> float:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for run in runs:
-            errs.append(run.y - np.asarray(model.predict(run.u), dtype=np.float64))
+            errs.append(run.y - run.predict(model))
     e = np.concatenate(errs)
     return float(np.sqrt(np.mean(e * e)))
 
