@@ -7,6 +7,7 @@ Free of files and MLflow: arrays in, arrays and small result objects out.
 import importlib
 
 from hysteresis.base import (
+    FAMILY_MODULES,
     HysteresisError,
     HysteresisModel,
     NotFittedError,
@@ -19,12 +20,8 @@ from hysteresis.metrics import METRIC_NAMES, error_statistics
 
 # One module per family; each registers itself on import. Modules still being written are
 # skipped only if absent (never on a real import error inside them).
-for _module in ("linear", "gamma", "preisach", "bouc_wen", "coleman_hodgdon"):
-    try:
-        importlib.import_module(f"hysteresis.{_module}")
-    except ModuleNotFoundError as exc:  # pragma: no cover - only while a family is missing
-        if exc.name != f"hysteresis.{_module}":
-            raise
+for _module in FAMILY_MODULES:
+    importlib.import_module(f"hysteresis.{_module}")
 
 __all__ = [
     "METRIC_NAMES", "HysteresisError", "HysteresisModel", "NotFittedError", "error_statistics",

@@ -70,9 +70,16 @@ def make_family(name: str, **params: Any) -> HysteresisModel:
     return family_class(name)(**params)
 
 
+#: The modules that register the families (imported by name on the first lookup, so the
+#: registry knows every family without base importing the modules that import it).
+FAMILY_MODULES = ("linear", "gamma", "preisach", "bouc_wen", "coleman_hodgdon")
+
+
 def _import_all_families() -> None:
-    # Importing the package registers every family module it lists.
-    import hysteresis  # noqa: F401
+    import importlib
+
+    for module in FAMILY_MODULES:
+        importlib.import_module(f"hysteresis.{module}")
 
 
 def as_1d(x: Any, name: str) -> FloatArray:

@@ -35,6 +35,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, lsq_linear, minimize, minimize_scalar
 
 from hysteresis._blas import single_thread_blas
+from hysteresis._numerics import decimation_index
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
@@ -43,7 +44,6 @@ from hysteresis.base import (
     check_pair,
     register_family,
 )
-from hysteresis.bouc_wen import decimation_index
 
 __all__ = ["ColemanHodgdonModel", "ch_simulate", "PAPER_PARAMS"]
 

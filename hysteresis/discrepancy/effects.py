@@ -550,6 +550,9 @@ class ComposedModel:
     def predict(self, run: RunData) -> FloatArray:
         if not hasattr(self, "base_"):
             raise HysteresisError("ComposedModel is not fitted yet; call fit(run) first")
+        if run.whole is not None:  # a later segment: from the state its record's input left
+            full = self.predict(run.whole)
+            return np.asarray(full[run.offset:run.offset + run.n], dtype=np.float64)
         run = self._seen(run)
         if hasattr(self, "op_weights_"):
             yo = self._scaled_design(run, self.base_) @ self.op_weights_

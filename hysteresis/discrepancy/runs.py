@@ -38,6 +38,11 @@ class RunData:
     #: When the recording began, for a run that is a later segment of a record (time since
     #: the start keeps counting from there: a creep does not restart mid-record).
     record_start_s: float | None = None
+    #: For a later segment judged on its own: the whole record and where the segment starts in
+    #: it. A model predicts the whole record and keeps the segment, so the segment is judged
+    #: from the state the earlier input left (the input is known; no output before is used).
+    whole: RunData | None = field(default=None, repr=False, compare=False)
+    offset: int = 0
 
     def __post_init__(self) -> None:
         self.t = as_1d(self.t, f"{self.run_id}: t")
@@ -68,8 +73,11 @@ class RunData:
     def n(self) -> int:
         return int(self.t.size)
 
-    def segment(self, start: int, stop: int, *, role: str, suffix: str) -> RunData:
-        """Samples ``start:stop`` as a run of its own (``<run_id>:<suffix>``), time kept."""
+    def segment(self, start: int, stop: int, *, role: str, suffix: str,
+                keep_history: bool = False) -> RunData:
+        """Samples ``start:stop`` as a run of its own (``<run_id>:<suffix>``), time kept.
+        ``keep_history``: the segment remembers the record (``whole``, ``offset``), so models
+        predict it after the input before it."""
         def cut(x: FloatArray | None) -> FloatArray | None:
             return None if x is None else x[start:stop].copy()
 
@@ -78,7 +86,9 @@ class RunData:
                        tension=cut(self.tension), tension_out=cut(self.tension_out),
                        config=dict(self.config), excitation=self.excitation, role=role,
                        record_start_s=(self.record_start_s if self.record_start_s is not None
-                                       else float(self.t[0])))
+                                       else float(self.t[0])),
+                       whole=self if keep_history and start > 0 else None,
+                       offset=start if keep_history else 0)
 
     @property
     def dt(self) -> float:
@@ -168,7 +178,7 @@ def split_single_runs(runs: Sequence[RunData], *, heldout_fraction: float = 0.3
             out.append(run)
             continue
         out += [run.segment(0, cut, role="identification", suffix="head"),
-                run.segment(cut, run.n, role="heldout", suffix="tail")]
+                run.segment(cut, run.n, role="heldout", suffix="tail", keep_history=True)]
         notes[key] = (f"one run ({run.run_id}): identifies on its first "
                       f"{run.t[cut] - run.t[0]:.1f} s, judged on its last "
                       f"{run.t[-1] - run.t[cut]:.1f} s ({100 * heldout_fraction:.0f} %)")
