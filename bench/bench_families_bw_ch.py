@@ -87,8 +87,8 @@ def run() -> dict[str, Any]:
         "coleman_hodgdon_ga_default": t_ch_ga,
         "coleman_hodgdon_ours_varpro": t_ch_vp,
         "coleman_hodgdon_ga_over_varpro": t_ch_ga / t_ch_vp,
-        "bouc_wen_paper_bfgs_train_mse": bw_paper.train_mse_,
-        "bouc_wen_ours_train_mse": bw.train_mse_,
+        "bouc_wen_paper_bfgs_train_mse": bw_paper.sse_ / bw_paper.n_samples_,
+        "bouc_wen_ours_train_mse": bw.sse_ / bw.n_samples_,
     }
 
     # -- forward simulation and inverses ------------------------------------------------------

@@ -149,7 +149,9 @@ class BoucWenModel(HysteresisModel):
         self.alpha_, self.beta_, self.offset_ = alpha, beta, float(offset)
         pred = self.predict(uu)
         finite = bool(np.all(np.isfinite(pred)))
-        self.train_mse_ = float(np.mean((yy - pred) ** 2)) if finite else math.inf
+        # the one training error of every family: squared errors summed over the record
+        self.sse_ = float(np.sum((yy - pred) ** 2)) if finite else math.inf
+        self.n_samples_ = int(uu.size)
         return self
 
     def _fit_varpro(self, u: FloatArray, y: FloatArray) -> tuple[FloatArray, float]:

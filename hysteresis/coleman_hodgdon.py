@@ -276,7 +276,8 @@ class ColemanHodgdonModel(HysteresisModel):
         self.origin_u_ = float(uc)
         self.origin_y_ = float(k + self.C_ * uc)
         pred = self.predict(uu)
-        self.train_mse_ = float(np.mean((yy - pred) ** 2))
+        self.sse_ = float(np.sum((yy - pred) ** 2))
+        self.n_samples_ = int(uu.size)
         return self
 
     def _fit_ga(self, un: FloatArray, yn: FloatArray, euler: bool, b_hi: float) -> FloatArray:

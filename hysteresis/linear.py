@@ -73,6 +73,7 @@ class LinearModel(StatefulModel):
         self.delay_ = int(d)
         y_hat = self.predict(uu)
         self.sse_ = float(np.sum((y_hat - yy) ** 2))
+        self.n_samples_ = int(yy.size)
         return self
 
     def initial_state(self, u0: float = 0.0) -> LinearState:

@@ -224,6 +224,7 @@ class PreisachModel(StatefulModel):
             else:
                 self._fit_parametric(rows, target, uu)
         self.sse_ = float(np.sum((self.predict(uu) - yy) ** 2))
+        self.n_samples_ = int(uu.size)
         return self
 
     def _fit_nonparametric(self, rows: FloatArray, target: FloatArray, u_rows: FloatArray) -> None:

@@ -41,7 +41,7 @@ def test_paper_form_recovers_parameters_from_own_data() -> None:
     np.testing.assert_allclose(canonical_params(model.params_), canonical_params(TRUE),
                                rtol=1e-4, atol=1e-6)
     assert model.offset_ == 0.0
-    assert model.train_mse_ < 1e-10
+    assert model.sse_ / model.n_samples_ < 1e-10
 
 
 def test_recovery_with_noise_and_offset_is_close() -> None:
@@ -52,7 +52,7 @@ def test_recovery_with_noise_and_offset_is_close() -> None:
     got, want = canonical_params(model.params_), canonical_params(TRUE)
     np.testing.assert_allclose(got[[3, 4, 5]], want[[3, 4, 5]], rtol=0.05)
     assert model.offset_ == pytest.approx(2.5, abs=0.02)
-    assert model.train_mse_ < 1.1 * 0.05**2
+    assert model.sse_ / model.n_samples_ < 1.1 * 0.05**2
 
 
 def test_fit_is_scale_robust() -> None:

@@ -34,6 +34,14 @@ def test_a_prediction_continues_exactly_from_its_returned_state(fitted: Any) -> 
     np.testing.assert_allclose(np.concatenate([head, tail]), whole, rtol=0, atol=1e-12)
 
 
+def test_one_training_error_attribute_means_the_same_in_every_family(fitted: Any) -> None:
+    # sse_: squared errors of the fitted model's own prediction summed over the whole
+    # identification record (a decimated fit is still scored on every sample)
+    assert fitted.n_samples_ == U.size
+    assert fitted.sse_ == pytest.approx(float(np.sum((fitted.predict(U) - Y) ** 2)), rel=1e-9)
+    assert not any(k.startswith("train_") for k in fitted.fitted_attributes())
+
+
 def test_stepping_equals_the_record(fitted: Any) -> None:
     n = 300
     whole = fitted.predict(U[:n])
