@@ -17,6 +17,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from rig_io.errors import RigIOError
+from rig_io.manifest import LOADCELL_CALIBRATION
 from rig_io.run import RawRun
 
 #: Columns of the calibrated streams.
@@ -146,22 +147,26 @@ def calibrate_raw_run(run: RawRun, *, files: dict[str, str] | None = None) -> Ph
     encoder = pd.DataFrame({"t_ns": t, "input": inp, "output": out})
     loadcell = None
     if run.loadcell is not None:
-        cells = m["channels"]["loadcell"]
-        applied["loadcell"] = {side: {"zero_mv_per_v": float(cells[side]["zero_mv_per_v"]),
-                                      "newton_per_mv_per_v":
-                                          float(cells[side]["newton_per_mv_per_v"])}
-                               for side in ("input", "output")}
-        loadcell = pd.DataFrame({
-            "t_ns": run.loadcell["t_ns"].to_numpy(dtype=np.int64),
-            "tension_in_n": mv_per_v_to_newton(
-                run.loadcell["input_mv_per_v"],
-                zero_mv_per_v=cells["input"]["zero_mv_per_v"],
-                newton_per_mv_per_v=cells["input"]["newton_per_mv_per_v"]),
-            "tension_out_n": mv_per_v_to_newton(
-                run.loadcell["output_mv_per_v"],
-                zero_mv_per_v=cells["output"]["zero_mv_per_v"],
-                newton_per_mv_per_v=cells["output"]["newton_per_mv_per_v"]),
-        })
+        cells = (m.get("channels") or {}).get("loadcell") or {}
+        applied["loadcell"] = {}
+        loadcell = pd.DataFrame({"t_ns": run.loadcell["t_ns"].to_numpy(dtype=np.int64)})
+        for side, col in (("input", "tension_in_n"), ("output", "tension_out_n")):
+            cell = cells.get(side) or {}
+            raw_mv = run.loadcell[f"{side}_mv_per_v"].to_numpy(dtype=np.float64)
+            if all(cell.get(k) is not None for k in LOADCELL_CALIBRATION):
+                applied["loadcell"][side] = {
+                    "zero_mv_per_v": float(cell["zero_mv_per_v"]),
+                    "newton_per_mv_per_v": float(cell["newton_per_mv_per_v"])}
+                loadcell[col] = mv_per_v_to_newton(
+                    raw_mv, zero_mv_per_v=cell["zero_mv_per_v"],
+                    newton_per_mv_per_v=cell["newton_per_mv_per_v"])
+                continue
+            # no zero and gain: never newtons; the input cell's raw mV/V is the tension proxy
+            loadcell[col] = np.full(raw_mv.size, np.nan)
+            kept = "tension_proxy (mV/V)" if side == "input" else "not kept (no raw column)"
+            applied["loadcell"][side] = {"calibrated": False, "unit": "mV/V", "raw": kept}
+            if side == "input":
+                loadcell["tension_proxy"] = raw_mv
     return PhysicalRun(manifest=m, encoder=encoder, loadcell=loadcell,
                        camera=_vision(run.camera), tracker=_vision(run.tracker),
                        events=run.events, files=dict(files or {}), applied=applied)

@@ -25,7 +25,7 @@ from rig_io import checks
 from rig_io.atomic import atomic_path
 from rig_io.errors import RigIOError, short
 from rig_io.limits import DEFAULT_LIMITS, ReadLimits, read_bytes
-from rig_io.manifest import check_manifest, is_safe_identifier, parse_manifest
+from rig_io.manifest import LOADCELL_CALIBRATION, check_manifest, is_safe_identifier, parse_manifest
 from rig_io.run import EVENT_KINDS, STREAM_COLUMNS, RawRun
 from rig_io.schema import validate_stream
 
@@ -169,10 +169,12 @@ def check_raw_run(run: RawRun, *, folder: Path | None = None) -> None:
         checks.check_timestamps(t, run=run_id, file=fname(name), check_gaps=name != "events",
                                 min_samples=1 if name == "events" else 2)
     if run.loadcell is not None:
-        cells = run.manifest["channels"]["loadcell"]
+        cells = run.manifest["channels"].get("loadcell")
         t = run.loadcell["t_ns"].to_numpy(dtype=np.int64)
         for side in ("input", "output"):
-            cell = cells[side]
+            cell = (cells or {}).get(side) or {}
+            if any(cell.get(k) is None for k in LOADCELL_CALIBRATION):
+                continue  # kept raw (no newtons to compare with a range in newtons)
             raw = run.loadcell[f"{side}_mv_per_v"].to_numpy(dtype=float)
             force = (raw - float(cell["zero_mv_per_v"])) * float(cell["newton_per_mv_per_v"])
             checks.check_saturation(t, force, range_n=cell.get("range_n"), side=side,

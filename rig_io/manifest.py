@@ -49,6 +49,8 @@ VISION_QUANTITIES = ("tip_angle_deg", "output_mm")
 VISION_SOURCES = ("camera", "tracker")
 ENCODER_KEYS = ("unit", "counts_per_unit", "counter_bits", "input_sign", "output_sign")
 LOADCELL_KEYS = ("newton_per_mv_per_v", "zero_mv_per_v", "range_n")
+#: The keys that turn a load cell's mV/V into newtons (without them the cell is kept raw).
+LOADCELL_CALIBRATION = ("newton_per_mv_per_v", "zero_mv_per_v")
 VISION_KEYS = ("quantity", "source")
 
 #: Identifiers that become file or folder names (``run_id``, ``rig``): a letter or digit
@@ -294,16 +296,14 @@ def check_manifest(manifest: dict[str, Any], *, file: str, streams: Iterable[str
                              key="channels.encoder")
         _need(enc, ENCODER_KEYS, "channels.encoder", run_s, file)
         if "loadcell" in names:
-            cells = channels.get("loadcell")
-            if not isinstance(cells, dict):
-                raise RigIOError("loadcell stream present but no channels.loadcell",
-                                 run=run_s, file=file, key="channels.loadcell")
+            # A cell without its zero and gain is kept raw and flagged (rig_io.calibrate), never
+            # turned into newtons; half a calibration is a mistake, not a choice.
+            cells = channels.get("loadcell") or {}
             for side in ("input", "output"):
-                cell = cells.get(side)
-                if not isinstance(cell, dict):
-                    raise RigIOError(f"no channels.loadcell.{side}", run=run_s, file=file,
-                                     key=f"channels.loadcell.{side}")
-                _need(cell, LOADCELL_KEYS, f"channels.loadcell.{side}", run_s, file)
+                cell = cells.get(side) or {}
+                if any(cell.get(k) is not None for k in LOADCELL_CALIBRATION):
+                    # calibrated: all of it, and the range its saturation check needs
+                    _need(cell, LOADCELL_KEYS, f"channels.loadcell.{side}", run_s, file)
     for vision in ("camera", "tracker"):
         if vision in names:
             ch = channels.get(vision)

@@ -294,8 +294,9 @@ def synchronise(run: PhysicalRun, options: SyncOptions | None = None) -> SyncedR
     info: dict[str, Any] = {"t0_ns": t0}
     if run.loadcell is not None:
         tl = run.loadcell["t_ns"].to_numpy(dtype=np.int64)
-        for col in ("tension_in_n", "tension_out_n"):
-            ch[col] = resample_boxcar(tl, run.loadcell[col].to_numpy(dtype=float), t_ns)
+        for col in ("tension_in_n", "tension_out_n", "tension_proxy"):
+            if col in run.loadcell:  # the proxy: an uncalibrated cell's raw mV/V
+                ch[col] = resample_boxcar(tl, run.loadcell[col].to_numpy(dtype=float), t_ns)
     for name, arr in run.extra.items():
         ch[name] = np.asarray(arr, dtype=float)
     if run.tracker is not None:
