@@ -67,7 +67,8 @@ START_POSITIONS = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: Relative drop in squared error a start position other than 0 must bring to be chosen.
 START_GAIN = 0.05
 #: Candidate widest thresholds, as fractions of the identification input's peak-to-peak range.
-THRESHOLD_FRACTIONS = (1.0 / 12.0, 1.0 / 6.0, 1.0 / 3.0, 1.0 / 2.0)
+#: Up to the whole range: a lag of a good fraction of a period reads as a wide loop.
+THRESHOLD_FRACTIONS = (1.0 / 12.0, 1.0 / 6.0, 1.0 / 3.0, 1.0 / 2.0, 3.0 / 4.0, 1.0)
 
 
 @dataclass
@@ -91,6 +92,10 @@ class GammaModel(StatefulModel):
     n_operators, max_threshold:
         Thresholds ``P = linspace(0, max_threshold, n_operators)`` (seed 001: 11 and 2.0 mm).
         ``max_threshold=None``: derived from the identification input (module docstring).
+    threshold_fraction:
+        With ``max_threshold=None``: the widest threshold as this fraction of the
+        identification input's peak-to-peak range, instead of the best of
+        :data:`THRESHOLD_FRACTIONS` (1/6 is the thesis' proportion).
     thresholds:
         Explicit thresholds (overrides the two above); non-negative, distinct.
     constraint:
@@ -118,6 +123,7 @@ class GammaModel(StatefulModel):
         *,
         n_operators: int = 11,
         max_threshold: float | None = None,
+        threshold_fraction: float | None = None,
         thresholds: list[float] | None = None,
         constraint: str = "nonneg",
         fit_offset: bool = True,
@@ -128,6 +134,7 @@ class GammaModel(StatefulModel):
     ) -> None:
         self.n_operators = n_operators
         self.max_threshold = max_threshold
+        self.threshold_fraction = threshold_fraction
         self.thresholds = thresholds
         self.constraint = constraint
         self.fit_offset = fit_offset
@@ -153,7 +160,12 @@ class GammaModel(StatefulModel):
             if not span > 0:
                 raise HysteresisError("the identification input is constant: no threshold "
                                       "can be derived from it; give max_threshold")
-            tops = [f * span for f in THRESHOLD_FRACTIONS]
+            fractions = THRESHOLD_FRACTIONS if self.threshold_fraction is None \
+                else (float(self.threshold_fraction),)
+            if not all(0 < f < np.inf for f in fractions):
+                raise HysteresisError(
+                    f"threshold_fraction must be > 0, got {self.threshold_fraction}")
+            tops = [f * span for f in fractions]
         return [_check_thresholds(np.linspace(0.0, top, int(self.n_operators))) for top in tops]
 
     def play_setup(self, u: Any, y: Any = None) -> tuple[FloatArray, float]:
@@ -226,26 +238,47 @@ class GammaModel(StatefulModel):
                   ) -> tuple[float, FloatArray, FloatArray, float, float]:
         """(SSE, thresholds, solution, multiplier, start position) of the best candidate.
 
-        A start position other than the first (the thesis' convention) must lower the squared
-        error by :data:`START_GAIN`: a clean record that starts where the thesis assumes keeps
-        it, so the fits of a campaign's shapes stay comparable (the shape-aware model regresses
-        their weights), while a record that clearly starts elsewhere gets its own start.
+        The widest play is chosen first (every play starting as the thesis assumes), then the
+        start position at that width. A start position other than the first must lower the
+        squared error by :data:`START_GAIN`: a clean record that starts where the thesis
+        assumes keeps it, so the fits of a campaign's shapes stay comparable (the shape-aware
+        model regresses their weights), while a record that clearly starts elsewhere gets its
+        own start. Candidates are compared on the QR-reduced problem (a k x k least squares
+        with the same minimiser); the chosen one is solved on the full record.
         """
-        best: tuple[float, FloatArray, FloatArray, float, float] | None = None
-        for p in self._threshold_candidates(uu):
-            fits = []
-            for pos in self._positions():
-                plays = play_matrix(uu, p, self._start(float(uu[0]), p, pos))[0]
-                x, lam = self._solve(plays, yy)
-                resid = self._design(plays) @ x - yy
-                fits.append((float(resid @ resid), p, x, lam, pos))
-            choice = min(fits, key=lambda f: f[0])
-            if choice[0] > (1.0 - START_GAIN) * fits[0][0]:
-                choice = fits[0]
-            if best is None or choice[0] < best[0]:
-                best = choice
-        assert best is not None  # at least one candidate
-        return best
+        spans = self._threshold_candidates(uu)
+        positions = self._positions()
+        u0 = float(uu[0])
+        if len(spans) > 1 or len(positions) > 1:
+            p = min(spans, key=lambda c: self._screen(uu, yy, c, positions[0]))
+            scores = [self._screen(uu, yy, p, pos) for pos in positions]
+            k = int(np.argmin(scores))
+            pos = positions[k] if scores[k] <= (1.0 - START_GAIN) * scores[0] else positions[0]
+        else:
+            p, pos = spans[0], positions[0]
+        plays = play_matrix(uu, p, self._start(u0, p, pos))[0]
+        x, lam = self._solve(plays, yy)
+        resid = self._design(plays) @ x - yy
+        return float(resid @ resid), p, x, lam, pos
+
+    def _screen(self, uu: FloatArray, yy: FloatArray, p: FloatArray, pos: float) -> float:
+        """Squared error of the candidate (thresholds ``p``, start ``pos``), through the QR
+        reduction: ``||A x - y||^2 = ||R x - Q^T y||^2 + ||y||^2 - ||Q^T y||^2``."""
+        a = self._design(play_matrix(uu, p, self._start(float(uu[0]), p, pos))[0])
+        with single_thread_blas():
+            gram, aty = a.T @ a, a.T @ yy
+            try:  # R^T R = A^T A: R is Q^T A's triangle (up to signs), for a fraction of a QR
+                r = np.linalg.cholesky(gram).T
+                qty = np.linalg.solve(r.T, aty)
+            except np.linalg.LinAlgError:  # rank-deficient candidate: the QR itself
+                q, r = np.linalg.qr(a)
+                qty = q.T @ yy
+        x, _ = solve_play_weights(np.asarray(r, dtype=np.float64),
+                                  np.asarray(qty, dtype=np.float64), n_weights=p.size,
+                                  constraint=self.constraint)
+        rest = float(yy @ yy - qty @ qty)
+        e = r @ x - qty
+        return float(e @ e) + max(rest, 0.0)
 
     def _design(self, plays: Any) -> FloatArray:
         a = np.asarray(plays)
@@ -410,6 +443,10 @@ def solve_play_weights(a: FloatArray, y: FloatArray, *, n_weights: int,
         if constraint == "nonneg":
             lower = np.full(a.shape[1], -np.inf)
             lower[:n_weights] = 0.0
+            if a.shape[0] > 2 * a.shape[1]:
+                # same minimiser on the k x k QR-reduced problem, and BVLS is cheap there
+                q, r = np.linalg.qr(a)
+                a, y = r, q.T @ y
             res = lsq_linear(a, y, bounds=(lower, np.inf), method="bvls")
             return np.asarray(res.x, dtype=np.float64), float("nan")
         c = np.zeros(a.shape[1])

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from hysteresis import family_names, make_family
+from hysteresis.base import HysteresisError
 
 RATE_HZ = 50.0
 T = np.arange(0.0, 60.0, 1.0 / RATE_HZ)
@@ -87,3 +88,12 @@ def test_gamma_finds_where_its_plays_start_when_the_record_starts_mid_loop() -> 
     err_fit = float(np.sqrt(np.mean((fitted.predict(u)[first] - y[first]) ** 2)))
     err_zero = float(np.sqrt(np.mean((thesis.predict(u)[first] - y[first]) ** 2)))
     assert err_fit < 0.01 and err_zero > 3 * err_fit, (err_fit, err_zero)
+
+
+def test_a_fixed_threshold_fraction_spans_that_share_of_the_input_range() -> None:
+    a, _ = SCALES["x1000"]
+    for scale in (1.0, a):
+        m = make_family("gamma", threshold_fraction=0.25).fit(scale * U_MM, Y_MM)
+        assert m.thresholds_.max() == pytest.approx(0.25 * scale * float(np.ptp(U_MM)))
+    with pytest.raises(HysteresisError, match="threshold_fraction"):
+        make_family("gamma", threshold_fraction=0.0).fit(U_MM, Y_MM)
