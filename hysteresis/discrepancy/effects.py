@@ -629,13 +629,17 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
     refined by a bounded scalar search between the grid neighbours of the best point.
     """
     ctx = tuple(sorted(effect.context(ident).items()))
+    # A slow base (Bouc-Wen, Coleman-Hodgdon, Preisach: an iterative fit) searches the
+    # effect's parameter with its fast screening base and is fitted once, at the chosen value.
+    screen: BaseFactory | None = getattr(base_factory, "screen", None)
+    search = screen or base_factory
 
-    def build(theta: Any) -> ComposedModel:
-        m = ComposedModel(base_factory, [*fixed, Term(effect, theta, ctx)], iterations=iterations)
+    def build(theta: Any, factory: BaseFactory = search) -> ComposedModel:
+        m = ComposedModel(factory, [*fixed, Term(effect, theta, ctx)], iterations=iterations)
         return m.fit(ident)
 
     grid = effect.grid(ident)
-    if effect.operator and is_gamma(base_factory()):
+    if effect.operator and is_gamma(search()):
         grid = effect.operator_grid(ident)
     fits = [build(th) for th in grid]
     sses = [_sse(m, ident) for m in fits]
@@ -673,7 +677,21 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
                                   options={"maxiter": 8, "xatol": 1e-3 * (hi - lo)})
             if float(res.fun) < best_sse:
                 model, best_sse = build(make(float(res.x))), float(res.fun)
+    if screen is not None:
+        return build(model.terms[-1].theta, base_factory)
     return model
+
+
+class ScreenedFactory:
+    """A base factory whose effect parameters are searched with a fast ``screen`` base (see
+    :func:`fit_with_effect`); calling it makes the real base."""
+
+    def __init__(self, base: BaseFactory, screen: BaseFactory) -> None:
+        self.base = base
+        self.screen = screen
+
+    def __call__(self) -> HysteresisModel:
+        return self.base()
 
 
 def retune(base_factory: BaseFactory, model: ComposedModel, ident: RunData, *,
