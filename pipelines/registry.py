@@ -340,4 +340,4 @@ def register_pipeline(tracker: Any, cfg: Mapping[str, Any], *, fits: pd.DataFram
     return register_champions(
         tracker, fits, metrics, data_hash=dataset_hash(processed),
         prefix=str(reg.get("prefix", DEFAULT_PREFIX)), alias=str(reg.get("alias", ALIAS)),
-        fit_excitation=str(fit_excitations[0]))
+        fit_excitation=str(cfg.get("identified_excitation") or fit_excitations[0]))
