@@ -1,12 +1,13 @@
-"""kill -9 a stage (generate, ingest, fit, validate, report) at a random moment, run the
-same command again: it completes, leaves no temporary file and no RUNNING MLflow run, and its
-outputs are byte-identical to those of an uninterrupted run.
+"""kill -9 a stage (generate, ingest, fit, validate, report, unseen_shape, discrepancy, and a
+pipeline that registers its champions) at a random moment, run the same command again: it
+completes, leaves no temporary file and no RUNNING MLflow run, and its outputs are
+byte-identical to those of an uninterrupted run.
 
-Each round kills ``TSM_CRASH_KILLS`` (default 3) of the five stages, chosen at random, each at
+Each round kills ``TSM_CRASH_KILLS`` (default 3) of the eight stages, chosen at random, each at
 a random moment within its uninterrupted duration, kills fit once more the moment it has a
 RUNNING MLflow run (a window random moments seldom hit), and runs the others straight through.
 ``TSM_CRASH_ROUNDS=<n>`` repeats the round n times (default 1: about a minute);
-``TSM_CRASH_KILLS=5`` kills every stage; ``TSM_CRASH_SEED`` replays one sequence.
+``TSM_CRASH_KILLS=8`` kills every stage; ``TSM_CRASH_SEED`` replays one sequence.
 """
 
 from __future__ import annotations
@@ -40,12 +41,19 @@ STAGES: dict[str, list[str]] = {
     "fit": ["pipelines.fit", "families=[linear,gamma]", "n_jobs=1"],
     "validate": ["pipelines.validate", "n_jobs=1", "progress=false"],
     "report": ["pipelines.report", "n_jobs=1", "plots.per_configuration=false"],
+    "unseen_shape": ["pipelines.unseen_shape", "n_jobs=1"],
+    # one run per configuration here: the workflow splits each in time
+    "discrepancy": ["pipelines.discrepancy", "base_family=gamma", "progress=false"],
+    # the champions' registration runs at the end of a pipeline that fitted and validated
+    "registry": ["pipelines.run_all", "stages=[fit,validate]", "n_jobs=1",
+                 "tracking.registry.enabled=true", 'overrides.fit=["families=[linear,gamma]"]'],
 }
 
 
 def _cmd(stage: str, root: Path) -> list[str]:
     module, *args = STAGES[stage]
-    quiet = [] if stage in ("validate", "report") else ["progress=false"]
+    quiet = [] if stage in ("validate", "report", "unseen_shape", "discrepancy") \
+        else ["progress=false"]
     return [sys.executable, "-m", module, *args, f"paths.root={root}", *quiet,
             f"hydra.run.dir={root}/outputs/{stage}"]
 
@@ -102,9 +110,10 @@ def _kill_when_running(stage: str, root: Path) -> tuple[int, bool]:
 
 
 def _outputs(root: Path) -> dict[str, object]:
-    """Every output file under ``root/data`` as bytes, except three that carry wall-clock
+    """Every output file under ``root/data`` as bytes, except those that carry wall-clock
     time: ``runs.json`` without its ``ingested_at`` fields, a model file without
-    ``fit_seconds`` (everything else of both is compared), and the ingest report, which
+    ``fit_seconds``, the discrepancy report without ``elapsed_s`` (everything else of these is
+    compared), the pipeline's stage timings by their names, and the ingest report, which
     describes the last invocation (timings, "unchanged" vs "processed"), by its accepted ids."""
     out: dict[str, object] = {}
     for p in sorted((root / "data").rglob("*")):
@@ -118,6 +127,12 @@ def _outputs(root: Path) -> dict[str, object]:
             out[rel] = doc
         elif p.name == "ingest_report.json":
             out[rel] = sorted(a["run_id"] for a in json.loads(p.read_text())["accepted"])
+        elif p.name == "pipeline_timing.json":  # wall-clock seconds per stage
+            out[rel] = sorted(json.loads(p.read_text()))
+        elif p.name == "discrepancy.json":
+            doc = json.loads(p.read_text())
+            doc.pop("elapsed_s")
+            out[rel] = doc
         elif "interim/models" in rel:
             doc = json.loads(p.read_text())
             doc.pop("fit_seconds")
