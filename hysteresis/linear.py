@@ -15,6 +15,7 @@ from hysteresis.base import (
     check_pair,
     register_family,
 )
+from hysteresis.lag import delay_search_max
 
 
 @dataclass
@@ -29,17 +30,21 @@ class LinearState:
 
 @register_family("linear")
 class LinearModel(StatefulModel):
-    """Gain, offset and an optional pure delay in samples.
+    """Gain, offset and a pure delay in samples.
 
     Parameters
     ----------
     delay:
-        Fixed delay in samples (used when ``max_delay`` is 0).
+        Fixed delay in samples; ``None``: searched (see ``max_delay``).
     max_delay:
-        If > 0, ``fit`` picks the delay in ``0..max_delay`` with the smallest SSE.
+        With ``delay=None``, ``fit`` picks the delay in ``0..max_delay`` with the smallest mean
+        squared error; ``None``: up to twice the lag at which the output's velocity
+        correlates best with the input's, at most a quarter of the record
+        (:func:`hysteresis.lag.delay_search_max`): a lag of seconds on a compliant drive is
+        found without knowing the sample rate, and a record with no lag keeps ``delay_ = 0``.
     """
 
-    def __init__(self, *, delay: int = 0, max_delay: int = 0) -> None:
+    def __init__(self, *, delay: int | None = None, max_delay: int | None = None) -> None:
         self.delay = delay
         self.max_delay = max_delay
 
@@ -48,11 +53,18 @@ class LinearModel(StatefulModel):
         if fit_params:
             raise HysteresisError(f"LinearModel.fit takes no extra arguments: {sorted(fit_params)}")
         uu, yy = check_pair(u, y)
-        if int(self.delay) < 0 or int(self.max_delay) < 0:
-            raise HysteresisError(
-                f"delay and max_delay must be >= 0: {self.delay}, {self.max_delay}"
-            )
-        delays = range(int(self.max_delay) + 1) if int(self.max_delay) > 0 else [int(self.delay)]
+        for name in ("delay", "max_delay"):
+            value = getattr(self, name)
+            if value is not None and int(value) < 0:
+                raise HysteresisError(f"{name} must be >= 0 or None, got {value}")
+        delays: range | list[int]
+        if self.delay is not None:
+            delays = [int(self.delay)]
+        else:
+            top = self.max_delay
+            if top is None:
+                top = int(np.floor(delay_search_max(uu, yy, 1.0)))
+            delays = range(int(top) + 1)
         best: tuple[float, int, float, float] | None = None
         for d in delays:
             if uu.size - d < 2:

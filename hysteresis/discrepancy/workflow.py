@@ -619,6 +619,7 @@ def strip_private(report: dict[str, Any]) -> dict[str, Any]:
 BASE_DEFAULTS: dict[str, dict[str, Any]] = {
     "gamma": {"constraint": "sum_to_one", "fit_offset": False, "start_state": "zero",
               "threshold_fraction": 1.0 / 6.0},
+    "linear": {"delay": 0},  # a searched delay would take up the latency looked for
 }
 
 #: Bases identified in closed form (a least-squares solve): fast enough to search an effect's

@@ -32,6 +32,20 @@ def test_recovers_delay_when_searched() -> None:
     assert fixed.delay_ == 3 and fixed.sse_ > m.sse_
 
 
+def test_a_lag_of_seconds_is_found_by_default_and_none_is_invented() -> None:
+    # 1.2 s at 50 Hz behind a slow sine that starts mid-stroke: the default search reaches
+    # it from the data (the old fixed-zero default left a 6x larger error)
+    t = np.arange(0.0, 80.0, 0.02)
+    u = 31.5 + 28.0 * np.sin(2 * np.pi * 0.1 * t)
+    lag = 60
+    y = 1.8 * np.concatenate([np.full(lag, u[0]), u[:-lag]]) - 4.0
+    m = LinearModel().fit(u, y)
+    assert m.delay_ == lag and m.gain_ == pytest.approx(1.8, rel=1e-9)
+    assert LinearModel(delay=0).fit(u, y).sse_ > 100 * max(m.sse_, 1e-9)
+    # a plant with no lag keeps none
+    assert LinearModel().fit(u, 1.8 * u - 4.0).delay_ == 0
+
+
 def test_predict_invert_and_state() -> None:
     m = LinearModel(delay=5).fit(U, np.concatenate([np.zeros(5), U[:-5]]) * 2.0 + 1.0)
     tri = triangle_decay()
