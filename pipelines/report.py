@@ -25,6 +25,7 @@ import hydra
 import numpy as np
 import pandas as pd
 
+from hysteresis.play import play_matrix
 from pipelines import cache, stages
 from pipelines.common import (
     Paths,
@@ -383,7 +384,7 @@ def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fi
     if q.size == 0 or q.size != p.size:
         return None
     design = getattr(model, "design_matrix", None)
-    ops = np.asarray(design(u)) if callable(design) else stages.play_operator_outputs(u, p)
+    ops = np.asarray(design(u)) if callable(design) else play_matrix(u, p, np.zeros(p.size))[0]
     return plots.elementary_figure(
         sub["t_s"].to_numpy(), u, sub["output"].to_numpy(), ops[:, :q.size], q, p,
         contained(plots_dir, f"elementary_{config.label}.png"),

@@ -684,21 +684,3 @@ def family_summary(board: pd.DataFrame, *, metric: str = "rmse") -> pd.DataFrame
         f"median_heldout_{metric}": g[f"heldout_{metric}"].median(),
     }).reset_index()
     return summary.sort_values(["mean_rank", "family"], kind="stable").reset_index(drop=True)
-
-
-def play_operator_outputs(u: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
-    """Outputs w_i(k) of the elementary play operators gamma_i of seed 001 eq. 4.8.
-
-    One column per threshold p_i, from the rest state w_i(1) = 0: the output follows the input
-    when it is pushed down (v < w), stays while w <= v <= w + p, and follows v - p above.
-    Used for the weighted elementary operators plot (seed 001 Fig. 4.12).
-    """
-    v = np.asarray(u, dtype=np.float64)
-    p = np.asarray(thresholds, dtype=np.float64)
-    w = np.zeros((v.size, p.size))
-    prev = np.zeros(p.size)
-    for k in range(v.size):
-        cur = np.where(prev > v[k], v[k], np.where(v[k] > prev + p, v[k] - p, prev))
-        w[k] = cur
-        prev = cur
-    return w

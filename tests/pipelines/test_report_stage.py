@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from hysteresis.gamma import GammaModel
+from hysteresis.play import play_matrix
 from pipelines import fit as fit_stage
 from pipelines import report as report_stage
 from pipelines import stages
@@ -105,11 +106,11 @@ def test_play_operator_matches_seed001_definition() -> None:
     # p = 1: output stays until the input is more than p above it, follows v - p up,
     # and follows the input down when the input falls below it (eq. 4.8).
     u = np.array([0.0, 0.5, 1.0, 2.0, 3.0, 2.5, 1.0, 0.0, 1.5])
-    w = stages.play_operator_outputs(u, np.array([1.0]))[:, 0]
+    w = play_matrix(u, np.array([1.0]), np.zeros(1))[0][:, 0]
     np.testing.assert_allclose(w, [0, 0, 0, 1, 2, 2, 1, 0, 0.5])
     model = GammaModel(n_operators=3, max_threshold=1.0)
     np.testing.assert_allclose(model.design_matrix(u),
-                               stages.play_operator_outputs(u, np.array([0.0, 0.5, 1.0])))
+                               play_matrix(u, np.array([0.0, 0.5, 1.0]), np.zeros(3))[0])
 
 
 def test_report_without_metrics_is_a_clear_error(tmp_path: Path) -> None:
