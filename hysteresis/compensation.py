@@ -38,6 +38,7 @@ from scipy import optimize
 
 from hysteresis.base import HysteresisError, as_1d, check_inverse_reach
 from hysteresis.metrics import error_statistics
+from hysteresis.play import gamma_simulate, play_matrix
 
 FloatArray = npt.NDArray[np.float64]
 StepFn = Callable[[float], Mapping[str, float]]
@@ -253,20 +254,11 @@ class PlayBank:
     def predict(self, u: Any, *, state: FloatArray | None = None) -> FloatArray:
         uu = as_1d(u, "u")
         w = self.initial_state() if state is None else np.asarray(state, dtype=np.float64).copy()
-        out = np.empty_like(uu)
-        for k, v in enumerate(uu):
-            out[k], w = self.step(float(v), w)
-        return out
+        return gamma_simulate(uu, self.plays, self.weights, float(self.offset), w)[0]
 
     def basis(self, u: Any) -> FloatArray:
         """Operator outputs ``(N, n)`` from rest; ``predict = offset + basis @ weights``."""
-        uu = as_1d(u, "u")
-        w = self.initial_state()
-        out = np.empty((uu.size, self.plays.size))
-        for k, v in enumerate(uu):
-            w = np.minimum(v, np.maximum(v - self.plays, w))
-            out[k] = w
-        return out
+        return play_matrix(as_1d(u, "u"), self.plays, self.initial_state())[0]
 
 
 def fit_play_bank(
