@@ -12,20 +12,25 @@ message layout as ``/rig/camera/value``); readers of the format ignore unknown t
 
 from __future__ import annotations
 
+import bz2
 import json
 import os
 import struct
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 from typing import Any, Literal
 
+import lz4.frame
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag1 import reader as ros1_reader
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
@@ -262,6 +267,40 @@ def sidecar_manifest(path: str | os.PathLike[str]) -> Path:
     return p.with_name(f"{p.name}.manifest.json")
 
 
+_CHUNK_LOCK = threading.Lock()
+
+
+def _bounded(make: Callable[[], Any], limit: int, what: str) -> Callable[[bytes], bytes]:
+    """A chunk decompressor that stops past ``limit`` bytes instead of filling the memory."""
+
+    def decompress(data: bytes) -> bytes:
+        out = make().decompress(data, max_length=limit + 1)
+        if len(out) > limit:
+            raise RigIOError(f"a {what} chunk decompresses to more than {limit / MB:g} MB "
+                             "(limits.max_decompressed_mb)")
+        return bytes(out)
+
+    return decompress
+
+
+@contextmanager
+def _bounded_ros1_chunks(limits: ReadLimits) -> Iterator[None]:
+    """rosbags decompresses a rosbag1 chunk whole and unbounded (a few kB of bz2 can hold
+    gigabytes of zeros); while a bag is read, its bz2 and lz4 chunks go through bounded
+    decompressors. The table is rosbags' module-level one, hence the lock."""
+    limit = int(limits.max_decompressed_mb * MB)
+    table = ros1_reader.decompressors
+    with _CHUNK_LOCK:
+        saved = dict(table)
+        table["bz2"] = _bounded(bz2.BZ2Decompressor, limit, "bz2")
+        table["lz4"] = _bounded(lz4.frame.LZ4FrameDecompressor, limit, "lz4")
+        try:
+            yield
+        finally:
+            table.clear()
+            table.update(saved)
+
+
 def _check_bag_files(p: Path, hint: str, limits: ReadLimits) -> None:
     """Only regular files, within the size limit (rosbags holds the messages in memory)."""
     if p.is_dir():
@@ -295,7 +334,8 @@ def read_bag(path: str | os.PathLike[str], *, check: bool = True,
     raw: dict[str, tuple[str, list[int], list[bytes]]] = {}
     last_t: int | None = None
     try:
-        with AnyReader([p], default_typestore=_store(p.suffix == ".bag")) as reader:
+        with _bounded_ros1_chunks(limits), \
+                AnyReader([p], default_typestore=_store(p.suffix == ".bag")) as reader:
             topics = set(reader.topics)
             wanted = [c for c in reader.connections
                       if c.topic in (T_MANIFEST, T_JOINTS, T_LOAD_IN, T_LOAD_OUT, T_CAMERA,

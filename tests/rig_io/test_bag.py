@@ -197,3 +197,35 @@ def test_bulk_serialisation_equals_message_by_message(tmp_path: Path, storage: s
     slow = [(t, topic, data) for topic, _, t, data in bag._messages(calibrate_raw_run(run), ros1)]
     assert len(fast) == len(slow) > 1000
     assert fast == slow  # byte for byte
+
+
+def test_compressed_rosbag1_chunks_are_read_within_the_decompression_limit(
+        tmp_path: Path) -> None:
+    from rig_io.limits import ReadLimits
+
+    run = make_raw_run("lz4_0001", duration_s=5.0)
+    path = write_bag(run, tmp_path / "run.bag", compress=True)
+    np.testing.assert_allclose(read_bag(path).encoder["input"],
+                               read_bag(write_bag(run, tmp_path / "plain.bag")).encoder["input"])
+    with pytest.raises(RigIOError, match="max_decompressed_mb") as err:
+        read_bag(path, limits=ReadLimits(max_decompressed_mb=0.01))
+    assert err.value.file == str(path)
+
+
+def test_a_bz2_bomb_chunk_is_refused_not_decompressed(tmp_path: Path) -> None:
+    # 64 MB of zeros in one chunk compress to a few dozen bytes of bz2; rosbags alone would
+    # inflate it whole. The default limit (40 MB) stops it.
+    from rosbags.rosbag1 import Writer as Writer1
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    string = store.types["std_msgs/msg/String"]
+    path = tmp_path / "bomb.bag"
+    writer = Writer1(path)
+    writer.set_compression(Writer1.CompressionFormat.BZ2)
+    with writer:
+        conn = writer.add_connection("/rig/manifest", "std_msgs/msg/String", typestore=store)
+        writer.write(conn, 1, store.serialize_ros1(string(data="\0" * (64 << 20)),
+                                                   "std_msgs/msg/String"))
+    assert path.stat().st_size < 1 << 20
+    with pytest.raises(RigIOError, match="decompresses to more than 40 MB"):
+        read_bag(path)
