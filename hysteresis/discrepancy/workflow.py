@@ -393,7 +393,11 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                        and s["load_cell_evidence"]["corroborated"]), None)
         winner = winner or next((s for s in scores if _accept(s, st)), None)
         added = [winner] if winner is not None else []
-        if not added and st.pair_search and st.max_effects - len(effects) >= 2:
+        # Pairs only while what is left would not be called clean: a residual within the
+        # clean band has nothing for two more terms to explain, and the pair search is the
+        # workflow's most expensive step.
+        if (not added and st.pair_search and st.max_effects - len(effects) >= 2
+                and loc["rmse_over_noise"] > st.clean_factor):
             added = _best_pair(scores, base_factory, groups, current, n_eff, load_cells, st)
         if not added:
             break
