@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import copy
 import fnmatch
+import io
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -41,6 +42,7 @@ import yaml
 from rig_io import checks
 from rig_io.calibrate import PhysicalRun
 from rig_io.errors import RigIOError
+from rig_io.limits import DEFAULT_LIMITS, ReadLimits, read_bytes
 from rig_io.run import FORMAT
 
 _TIME_TO_NS = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}
@@ -115,7 +117,7 @@ def file_settings(mapping: dict[str, Any], path: str | os.PathLike[str]) -> dict
 def manifest_for(mapping: dict[str, Any], path: str | os.PathLike[str]) -> dict[str, Any]:
     """The ``tsm-rig-log/1`` manifest recorded for one foreign file."""
     s = file_settings(mapping, path)
-    stem = Path(path).stem
+    stem = Path(Path(path).name.removesuffix(".gz")).stem  # data_1_1.txt.gz -> data_1_1
     out_ch = s["output"]
     channels: dict[str, Any] = {
         "encoder": {"unit": s["input"].get("unit", "mm")},
@@ -139,11 +141,13 @@ def manifest_for(mapping: dict[str, Any], path: str | os.PathLike[str]) -> dict[
 
 
 def import_file(mapping: dict[str, Any], path: str | os.PathLike[str], *,
-                check: bool = True) -> PhysicalRun:
+                check: bool = True, limits: ReadLimits = DEFAULT_LIMITS) -> PhysicalRun:
     """Read one foreign log into a :class:`PhysicalRun` (values scaled to the mapping's units).
 
     Bad cells, missing columns, backward time and long gaps raise :class:`RigIOError`
-    naming run, file and row (1-based line, header = line 1).
+    naming run, file and row (1-based line, header = line 1). The file is read in one
+    bounded read (``limits.max_file_mb``; a ``.gz`` log also ``limits.max_decompressed_mb``),
+    never handed to a parser that would decompress or read it without a bound.
     """
     path = Path(path)
     file = str(path)
@@ -151,9 +155,14 @@ def import_file(mapping: dict[str, Any], path: str | os.PathLike[str], *,
     manifest = manifest_for(mapping, path)
     run = manifest["run_id"]
     csv_opts = dict(s.get("csv") or {})
+    gz = path.suffix.lower() == ".gz"
+    data = read_bytes(path, base=None, run=run, limit_mb=limits.max_file_mb,
+                      limit_name="max_file_mb",
+                      gunzip_limit_mb=limits.max_decompressed_mb if gz else None)
     try:
-        df = pd.read_csv(path, sep=csv_opts.get("delimiter", ","),
-                         comment=csv_opts.get("comment"), skip_blank_lines=False)
+        df = pd.read_csv(io.BytesIO(data), sep=csv_opts.get("delimiter", ","),
+                         comment=csv_opts.get("comment"), skip_blank_lines=False,
+                         compression=None)
     except (OSError, UnicodeDecodeError, pd.errors.ParserError,
             pd.errors.EmptyDataError) as err:
         raise RigIOError(f"unreadable file: {err}", run=run, file=file) from None

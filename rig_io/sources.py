@@ -21,7 +21,7 @@ from rig_io.calibrate import PhysicalRun, calibrate_raw_run
 from rig_io.errors import RigIOError, short
 from rig_io.folder import MANIFEST, STREAMS, find_stream, read_run_folder
 from rig_io.importer import import_file, matches
-from rig_io.limits import DEFAULT_LIMITS, ReadLimits, check_regular
+from rig_io.limits import DEFAULT_LIMITS, ReadLimits
 from rig_io.manifest import check_manifest, is_safe_identifier
 
 SourceKind = Literal["folder", "rosbag1", "rosbag2", "import"]
@@ -177,12 +177,7 @@ def _load(source: Source, *, mapping: dict[str, Any] | None,
     if source.kind == "import":
         if mapping is None:
             raise RigIOError("foreign log without an importer mapping", file=str(source.path))
-        st = check_regular(source.path, base=None, run=_hint(source))
-        if st.st_size > limits.max_file_mb * 1024 * 1024:
-            raise RigIOError(f"file is {st.st_size / 2**20:.1f} MB, beyond the limit of "
-                             f"{limits.max_file_mb:g} MB (limits.max_file_mb)",
-                             run=_hint(source), file=str(source.path))
-        phys = import_file(mapping, source.path)
+        phys = import_file(mapping, source.path, limits=limits)
         # The mapping wrote this manifest: it meets the same schema as a rig's.
         check_manifest(phys.manifest, file=str(source.path), streams=(), si_units=True,
                        run_hint=_hint(source))

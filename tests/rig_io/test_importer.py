@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import gzip
 import hashlib
+import os
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +14,7 @@ from pipelines.ingest import run_ingest
 from rig_io.dataset import read_dataset, read_runs
 from rig_io.errors import RigIOError
 from rig_io.importer import find_files, import_file, load_mapping, manifest_for
+from rig_io.limits import ReadLimits
 
 REPO = Path(__file__).resolve().parents[2]
 MAPPING = REPO / "conf" / "importer" / "tendon_catheter.yaml"
@@ -102,6 +105,28 @@ def test_foreign_log_bad_input(tmp_path: Path) -> None:
         import_file(m, _foreign(tmp_path, HEADER + "".join(rows[:40] + rows[70:])))
     with pytest.raises(RigIOError, match="no data rows|unreadable"):
         import_file(m, _foreign(tmp_path, HEADER))
+
+
+def test_foreign_logs_are_read_within_the_limits(tmp_path: Path) -> None:
+    m = load_mapping(MAPPING)
+    plain = _foreign(tmp_path, HEADER + _rows(200))
+    packed = tmp_path / "data_1_1.txt.gz"
+    packed.write_bytes(gzip.compress(plain.read_bytes()))
+    a, b = import_file(m, plain), import_file(m, packed)
+    assert b.manifest["run_id"] == a.manifest["run_id"] == "catheter_data_1_1"
+    np.testing.assert_array_equal(a.encoder.to_numpy(), b.encoder.to_numpy())
+    tiny = ReadLimits(max_file_mb=0.001, max_decompressed_mb=0.001)
+    with pytest.raises(RigIOError, match=r"beyond the limit of 0.001 MB \(limits.max_file_mb\)"):
+        import_file(m, plain, limits=tiny)
+    # a gzip bomb: 80 MB of one repeated row in a few hundred kB, stopped at the default limit
+    bomb = tmp_path / "data_1_2.txt.gz"
+    bomb.write_bytes(gzip.compress((HEADER + _rows(1) * (2 << 20)).encode(), 9))
+    with pytest.raises(RigIOError, match=r"decompresses to more than 40 MB"):
+        import_file(m, bomb)
+    fifo = tmp_path / "data_1_3.txt"
+    os.mkfifo(fifo)
+    with pytest.raises(RigIOError, match="not a regular file|special"):
+        import_file(m, fifo)
 
 
 def test_mapping_errors(tmp_path: Path) -> None:
