@@ -73,7 +73,7 @@ bench: $(STAMP)
 # kill -9 every stage at random moments, ROUNDS times, and check each re-run (several minutes)
 ROUNDS ?= 5
 crash-test: $(STAMP)
-	TSM_CRASH_ROUNDS=$(ROUNDS) TSM_CRASH_KILLS=8 $(PY) -m pytest -q -n 0 \
+	TSM_CRASH_ROUNDS=$(ROUNDS) TSM_CRASH_KILLS=9 $(PY) -m pytest -q -n 0 \
 		tests/pipelines/test_crash_recovery.py -k random
 
 ui: $(STAMP)

@@ -1,13 +1,13 @@
-"""kill -9 a stage (generate, ingest, fit, validate, report, unseen_shape, discrepancy, and a
-pipeline that registers its champions) at a random moment, run the same command again: it
-completes, leaves no temporary file and no RUNNING MLflow run, and its outputs are
-byte-identical to those of an uninterrupted run.
+"""kill -9 a stage (generate, ingest, fit, validate, report, unseen_shape, discrepancy,
+compensate, and a pipeline that registers its champions) at a random moment, run the same
+command again: it completes, leaves no temporary file and no RUNNING MLflow run, and its
+outputs are byte-identical to those of an uninterrupted run.
 
-Each round kills ``TSM_CRASH_KILLS`` (default 3) of the eight stages, chosen at random, each at
+Each round kills ``TSM_CRASH_KILLS`` (default 3) of the nine stages, chosen at random, each at
 a random moment within its uninterrupted duration, kills fit once more the moment it has a
 RUNNING MLflow run (a window random moments seldom hit), and runs the others straight through.
 ``TSM_CRASH_ROUNDS=<n>`` repeats the round n times (default 1: about a minute);
-``TSM_CRASH_KILLS=8`` kills every stage; ``TSM_CRASH_SEED`` replays one sequence.
+``TSM_CRASH_KILLS=9`` kills every stage; ``TSM_CRASH_SEED`` replays one sequence.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from mlflow import MlflowClient
 
@@ -32,6 +33,9 @@ from tests.pipelines.pipeline_data import mlflow_store
 
 # kill -9 of stages in subprocesses: `make test-fast` leaves these out
 pytestmark = pytest.mark.slow
+
+#: Wall-clock columns of the compensation tables (solver and fit times).
+TIMING_COLUMNS = ("fit_s", "mean_ms", "median_ms", "ratio_to_ours")
 
 STAGES: dict[str, list[str]] = {
     "generate": ["pipelines.generate", "campaign=quick", "campaign.radii_mm=[30,60,75]",
@@ -44,6 +48,8 @@ STAGES: dict[str, list[str]] = {
     "unseen_shape": ["pipelines.unseen_shape", "n_jobs=1"],
     # one run per configuration here: the workflow splits each in time
     "discrepancy": ["pipelines.discrepancy", "base_family=gamma", "progress=false"],
+    # the papers' compensation experiments (the smoke size), on the virtual rig
+    "compensate": ["pipelines.compensate", "experiment=compensation_quick", "plots=false"],
     # the champions' registration runs at the end of a pipeline that fitted and validated
     "registry": ["pipelines.run_all", "stages=[fit,validate]", "n_jobs=1",
                  "tracking.registry.enabled=true", 'overrides.fit=["families=[linear,gamma]"]'],
@@ -112,9 +118,11 @@ def _kill_when_running(stage: str, root: Path) -> tuple[int, bool]:
 def _outputs(root: Path) -> dict[str, object]:
     """Every output file under ``root/data`` as bytes, except those that carry wall-clock
     time: ``runs.json`` without its ``ingested_at`` fields, a model file without
-    ``fit_seconds``, the discrepancy report without ``elapsed_s`` (everything else of these is
-    compared), the pipeline's stage timings by their names, and the ingest report, which
-    describes the last invocation (timings, "unchanged" vs "processed"), by its accepted ids."""
+    ``fit_seconds``, the discrepancy report without ``elapsed_s``, the compensation tables
+    without their timing columns (everything else of these is compared), the compensation
+    report by its headings, the pipeline's stage timings by their names, and the ingest
+    report, which describes the last invocation (timings, "unchanged" vs "processed"), by its
+    accepted ids."""
     out: dict[str, object] = {}
     for p in sorted((root / "data").rglob("*")):
         if not p.is_file():
@@ -129,6 +137,12 @@ def _outputs(root: Path) -> dict[str, object]:
             out[rel] = sorted(a["run_id"] for a in json.loads(p.read_text())["accepted"])
         elif p.name == "pipeline_timing.json":  # wall-clock seconds per stage
             out[rel] = sorted(json.loads(p.read_text()))
+        elif p.suffix == ".parquet" and "reports/compensation" in rel:
+            # solver and fit timings are wall-clock; every result column is compared
+            df = pd.read_parquet(p)
+            out[rel] = df.drop(columns=[c for c in TIMING_COLUMNS if c in df]).to_dict("list")
+        elif p.name == "compensation.md":  # its timing table is wall-clock: the headings
+            out[rel] = [ln for ln in p.read_text().splitlines() if ln.startswith("#")]
         elif p.name == "discrepancy.json":
             doc = json.loads(p.read_text())
             doc.pop("elapsed_s")
