@@ -1,9 +1,11 @@
 """Benchmark of the discrepancy workflow.
 
-One virtual-rig configuration (90 deg / 30 mm) with a hidden time delay and drift, seed 001
-excitations with 3 periods per amplitude, analysed at 20 Hz with the Gamma base. Reports the
-wall time of the whole locate -> name -> add loop, and the ratio against the reference joint
-refit by backfitting (the generic path every non-Gamma family takes) measured in the same run.
+``injector``: what ``make discrepancy`` answers (automatic base) on every case type of the
+independent injector, with seconds per source. The rest: one virtual-rig configuration
+(90 deg / 30 mm) with a hidden time delay and drift, seed 001 excitations with 3 periods per
+amplitude, analysed at 20 Hz with the Gamma base. Reports the wall time of the whole
+locate -> name -> add loop, and the ratio against the reference joint refit by backfitting
+(the generic path every non-Gamma family takes) measured in the same run.
 """
 
 from __future__ import annotations
@@ -43,7 +45,9 @@ def run() -> dict[str, Any]:
     with mock.patch.object(effects, "_joint_linear", lambda *a, **k: None):
         t_backfit, rep_bf = _time(workflow)
     n_samples = sum(r.n for r in runs)
+    injector = injector_sources()
     return {
+        "injector": injector,
         "blas_limit": blas_limit(),
         "samples_analysed": n_samples,
         "effects_found": [e["name"] for e in rep["effects"]],
@@ -71,8 +75,8 @@ def injector_sources() -> dict[str, dict[str, Any]]:
     from the independent injector (plain Gamma, Preisach and Bouc-Wen plants): seconds, the
     base chosen, the verdict and what was named, per case type and plant.
 
-    Not part of ``run()``: with the automatic base some sources still take many minutes
-    (``python -m bench.bench_discrepancy --injector``)."""
+    About 6 min for the 27 sources on 2 cores (``python -m bench.bench_discrepancy
+    --injector`` runs it alone); ``run()`` includes it under ``injector``."""
     from hydra import compose, initialize_config_dir
 
     from hysteresis.discrepancy.inject import injected_runs
