@@ -329,6 +329,19 @@ class ColemanHodgdonModel(HysteresisModel):
         coef = solve(la)[1]
         return np.array([la, coef[0], coef[1], coef[2]])
 
+    @classmethod
+    def from_params(cls, A: float, B: float, C: float, *,
+                    origin: tuple[float, float] = (0.0, 0.0),
+                    scheme: str = "exact") -> ColemanHodgdonModel:
+        """A model with known parameters (the paper's, a plant's), fitted to nothing."""
+        _check_params(A, C)
+        _is_euler(scheme)
+        model = cls(scheme=scheme)
+        model.A_, model.B_, model.C_ = float(A), float(B), float(C)
+        model.origin_u_, model.origin_y_ = float(origin[0]), float(origin[1])
+        model.sse_, model.n_samples_ = 0.0, 0
+        return model
+
     # -- parameters and state -------------------------------------------------------------
     @property
     def params_(self) -> FloatArray:
@@ -344,6 +357,11 @@ class ColemanHodgdonModel(HysteresisModel):
     def _p(self) -> tuple[float, float, float, float]:
         self.check_fitted()
         return float(self.A_), float(self.B_), float(self.C_), self.k_
+
+    def rate(self, y: float, u: float, v: float) -> float:
+        """Eq. 10's right-hand side ``dy/dt`` at output ``y``, input ``u``, input rate ``v``."""
+        a_, b_, c_, k = self._p()
+        return a_ * abs(v) * (c_ * u + k - y) + b_ * v
 
     def initial_state(self, u0: float = 0.0) -> dict[str, float]:
         """Rest state on the loop's centre line at input u0: ``{"u": u0, "y": output}``."""

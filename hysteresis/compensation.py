@@ -15,7 +15,9 @@ The schemes (papers in ``../shared/seeds``):
 * **vision feedback** (seed 002 baseline "Feedback Com"): an integral loop closed on a 30 Hz,
   delayed, noisy camera (:class:`CameraModel`, :func:`run_vision_feedback`);
 * **PD / AME-PD** (seed 000 eq. 19-25) with the UKF active estimation of the model error of the
-  Coleman-Hodgdon reference model (eq. 12-18) (:class:`ModelErrorUKF`, :func:`run_ame_pd`);
+  Coleman-Hodgdon reference model (eq. 12-18): the family
+  :class:`~hysteresis.coleman_hodgdon.ColemanHodgdonModel` and the filter
+  :class:`~hysteresis.ukf.ActiveModelUKF` (:func:`model_error_ukf`, :func:`run_ame_pd`);
 * **ours** (:func:`run_inverse_with_error_correction`): the exact Gamma inverse with an online
   estimate of the model's output error (a scalar random-walk Kalman filter on the residual of the
   delayed measurement against the model's own prediction, i.e. the UKF idea of seed 000 moved
@@ -37,16 +39,18 @@ import numpy.typing as npt
 from scipy import optimize
 
 from hysteresis.base import HysteresisError, as_1d, check_inverse_reach
+from hysteresis.coleman_hodgdon import ColemanHodgdonModel
 from hysteresis.metrics import error_statistics
 from hysteresis.play import gamma_simulate, play_matrix
+from hysteresis.ukf import ActiveModelUKF
 
 FloatArray = npt.NDArray[np.float64]
 StepFn = Callable[[float], Mapping[str, float]]
 
 __all__ = [
-    "CHParams", "CameraModel", "FamilyStepper", "GAMMA_METHODS", "InverseStepper", "LoopResult",
-    "ModelErrorUKF", "PlayBank", "PlayBankStepper", "StrokeLimits", "as_stepper", "camera_frames",
-    "ch_simulate", "estimate_model_error", "fit_coleman_hodgdon_ga", "fit_play_bank",
+    "CameraModel", "FamilyStepper", "GAMMA_METHODS", "InverseStepper", "LoopResult",
+    "PlayBank", "PlayBankStepper", "StrokeLimits", "UKF_DEFAULTS", "as_stepper", "camera_frames",
+    "estimate_model_error", "fit_play_bank", "model_error_ukf",
     "gamma_inverse", "gamma_step_inverse", "mixed_sine_profile", "play_bank_from", "reduction",
     "run_ame_pd", "run_inverse_with_error_correction", "run_open_loop", "run_vision_feedback",
     "seed000_target", "seed002_motion", "segment_statistics", "sine_profile", "triangle_profile",
@@ -504,134 +508,33 @@ def run_vision_feedback(
 
 
 # ---------------------------------------------------------------------------------------------
-# Coleman-Hodgdon reference model (seed 000 eq. 10-11) and its GA identification (eq. 26)
+# UKF active estimation of the model error (seed 000 eq. 12-18): the reference model is the
+# Coleman-Hodgdon family (hysteresis.coleman_hodgdon), the filter hysteresis.ukf's
 # ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class CHParams:
-    """Seed 000 eq. 10: d alpha/dt = A |v| (C (l - O_l) - (alpha - O_alpha)) + B v, v = dl/dt."""
-
-    A: float
-    B: float
-    C: float
-    O_l: float = 0.0
-    O_alpha: float = 0.0
-
-    def rate(self, alpha: float, pull: float, v: float) -> float:
-        return self.A * abs(v) * (self.C * (pull - self.O_l) - (alpha - self.O_alpha)) + self.B * v
+#: Seed 000 eq. 29 as diagonals: P0 = diag(10, 10), Q = diag(5, 15), R = 1e-4 (deg^2).
+UKF_DEFAULTS: dict[str, Any] = {"P0": (10.0, 10.0), "Q": (5.0, 15.0), "R": 1e-4}
 
 
-def ch_simulate(params: CHParams, pull: Any, *, alpha0: float | None = None) -> FloatArray:
-    """Euler simulation of eq. 10 on the sampled tendon pull (the discrete form of eq. 16)."""
-    ll = as_1d(pull, "l")
-    out = np.empty_like(ll)
-    a = params.O_alpha + params.C * (ll[0] - params.O_l) if alpha0 is None else float(alpha0)
-    out[0] = a
-    A, B, C, Ol, Oa = params.A, params.B, params.C, params.O_l, params.O_alpha
-    for k in range(1, ll.size):
-        dl = ll[k] - ll[k - 1]  # v * Ts
-        a = a + A * abs(dl) * (C * (ll[k - 1] - Ol) - (a - Oa)) + B * dl
-        out[k] = a
-    return out
+def model_error_ukf(reference: ColemanHodgdonModel, *, dt_s: float,
+                    **ukf_kw: Any) -> ActiveModelUKF:
+    """The seed 000 estimator around ``reference``; ``P0``/``Q`` may be given as diagonals."""
+    _check_dt(dt_s)
+    kw = {**UKF_DEFAULTS, **ukf_kw}
+    unknown = sorted(set(kw) - set(UKF_DEFAULTS))
+    if unknown:
+        raise HysteresisError(f"unknown UKF settings {unknown}; use P0, Q, R")
 
+    def matrix(x: Any) -> FloatArray:
+        m = np.asarray(x, dtype=np.float64)
+        return np.diag(m) if m.ndim == 1 else m
 
-def fit_coleman_hodgdon_ga(
-    pull: Any, alpha: Any, *, seed: int = 0, maxiter: int = 60, popsize: int = 15,
-    bounds: Mapping[str, tuple[float, float]] | None = None,
-) -> CHParams:
-    """GA-style identification of A, B, C (and the backlash origin O_alpha) minimising the MSE
-    of eq. 26, by SciPy's differential evolution (an evolutionary algorithm like the paper's GA).
-    ``O_l`` is fixed at the first pull sample."""
-    ll, aa = as_1d(pull, "l"), as_1d(alpha, "alpha")
-    if ll.shape != aa.shape:
-        raise HysteresisError("pull and alpha differ in length")
-    slope = float(np.polyfit(ll, aa, 1)[0])
-    b = dict(bounds or {})
-    A_b = b.get("A", (1e-3, 20.0 / max(float(np.ptp(ll)), 1e-9)))
-    B_b = b.get("B", (-3.0 * abs(slope) - 1.0, 3.0 * abs(slope) + 1.0))
-    C_b = b.get("C", (0.0, 3.0 * abs(slope) + 1.0))
-    span = float(np.ptp(aa))
-    Oa_b = b.get("O_alpha", (float(aa.min()) - span, float(aa.max()) + span))
-    O_l = float(ll[0])
-
-    def mse(x: FloatArray) -> float:
-        sim = ch_simulate(CHParams(x[0], x[1], x[2], O_l, x[3]), ll, alpha0=float(aa[0]))
-        return float(np.mean((aa - sim) ** 2))
-
-    # Callers decimate long records first (eq. 10 is rate-independent, the loop is Python).
-    res = optimize.differential_evolution(
-        mse, [A_b, B_b, C_b, Oa_b], seed=seed, maxiter=maxiter, popsize=popsize, tol=1e-8,
-        polish=True,
-    )
-    x = res.x
-    return CHParams(float(x[0]), float(x[1]), float(x[2]), O_l, float(x[3]))
-
-
-# ---------------------------------------------------------------------------------------------
-# UKF active estimation of the model error (seed 000 eq. 12-18)
-# ---------------------------------------------------------------------------------------------
-class ModelErrorUKF:
-    """State ``X = [alpha~, f_h]``; process eq. 16, measurement ``Y = alpha~ + V``.
-
-    The paper's 2n+1 sigma points (Merwe scaling, alpha=1, beta=2, kappa=1). Defaults are
-    the paper's eq. 29: P0 = diag(10, 10), Q = diag(5, 15),
-    R = 1e-4 (deg^2 per step)."""
-
-    def __init__(
-        self, params: CHParams, *, dt_s: float, alpha0: float, P0: Sequence[float] = (10.0, 10.0),
-        Q: Sequence[float] = (5.0, 15.0), R: float = 1e-4,
-    ) -> None:
-        _check_dt(dt_s)
-        self.p = params
-        self.dt = dt_s
-        self.x = np.array([float(alpha0), 0.0])
-        self.P = np.diag(np.asarray(P0, dtype=np.float64))
-        self.Q = np.diag(np.asarray(Q, dtype=np.float64))
-        self.R = float(R)
-        # Merwe scaled sigma points with alpha=1, beta=2, kappa=1: lambda = 1, all weights > 0.
-        n, kappa, beta = 2, 1.0, 2.0
-        lam = (n + kappa) - n
-        self._c = n + lam
-        self.Wm = np.full(2 * n + 1, 1.0 / (2 * self._c))
-        self.Wm[0] = lam / self._c
-        self.Wc = self.Wm.copy()
-        self.Wc[0] += beta  # + (1 - alpha^2 + beta) with alpha = 1
-        self._sig = np.zeros((n, 2 * n + 1))
-
-    def _f(self, sig: FloatArray, pull: float, v: float) -> FloatArray:
-        p = self.p
-        out = sig.copy()
-        out[0] = sig[0] + self.dt * (
-            p.A * abs(v) * (p.C * (pull - p.O_l) - (sig[0] - p.O_alpha)) + p.B * v + sig[1]
-        )
-        return out
-
-    def predict(self, pull: float, v: float) -> None:
-        """Time update with the pull at step k and the pull velocity ``v``."""
-        L = np.linalg.cholesky(self._c * self.P + 1e-12 * np.eye(2))
-        sig = np.column_stack([self.x, self.x[:, None] + L, self.x[:, None] - L])
-        prop = np.column_stack([self._f(sig[:, i], pull, v) for i in range(sig.shape[1])])
-        self.x = prop @ self.Wm
-        d = prop - self.x[:, None]
-        self.P = (d * self.Wc) @ d.T + self.Q
-        self._sig = prop
-
-    def update(self, y: float) -> None:
-        """Measurement update with the measured angle ``y``."""
-        ys = self._sig[0]
-        ym = float(ys @ self.Wm)
-        dy = ys - ym
-        dx = self._sig - self.x[:, None]
-        Py = float((dy * self.Wc) @ dy) + self.R
-        Pxy = (dx * self.Wc) @ dy
-        K = Pxy / Py
-        self.x = self.x + K * (y - ym)
-        self.P = self.P - np.outer(K, K) * Py
-        self.P = 0.5 * (self.P + self.P.T)
+    return ActiveModelUKF(reference, dt=dt_s, P0=matrix(kw["P0"]), Q=matrix(kw["Q"]),
+                          R=float(kw["R"]))
 
 
 def estimate_model_error(
-    params: CHParams, pull: Any, alpha_meas: Any, *, dt_s: float, alpha0: float | None = None,
-    **ukf_kw: Any,
+    reference: ColemanHodgdonModel, pull: Any, alpha_meas: Any, *, dt_s: float,
+    alpha0: float | None = None, **ukf_kw: Any,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Offline run of the estimator over a recorded pull/angle pair (seed 000 section V.C).
 
@@ -648,17 +551,8 @@ def estimate_model_error(
         if finite.size == 0:
             raise HysteresisError("alpha_meas has no finite measurement")
         alpha0 = float(aa[finite[0]])
-    model = ch_simulate(params, ll, alpha0=alpha0)
-    ukf = ModelErrorUKF(params, dt_s=dt_s, alpha0=alpha0, **ukf_kw)
-    est = np.empty_like(ll)
-    fh = np.empty_like(ll)
-    est[0], fh[0] = alpha0, 0.0
-    for k in range(1, ll.size):
-        ukf.predict(float(ll[k - 1]), float((ll[k] - ll[k - 1]) / dt_s))
-        if math.isfinite(aa[k]):
-            ukf.update(float(aa[k]))
-        est[k], fh[k] = ukf.x
-    return model, est, fh
+    res = model_error_ukf(reference, dt_s=dt_s, **ukf_kw).run(ll, aa, y0=float(alpha0))
+    return res.model, res.estimate, res.f_h
 
 
 def segment_statistics(measured: Any, estimate: Any) -> dict[str, float]:
@@ -671,7 +565,8 @@ def segment_statistics(measured: Any, estimate: Any) -> dict[str, float]:
 # PD and AME-PD (seed 000 eq. 19-25)
 # ---------------------------------------------------------------------------------------------
 def run_ame_pd(
-    step: StepFn, desired: Any, params: CHParams | None, *, dt_s: float = 0.01, kp: float = 0.02,
+    step: StepFn, desired: Any, reference: ColemanHodgdonModel | None, *, dt_s: float = 0.01,
+    kp: float = 0.02,
     kd: float = 0.05, kc: float = 0.06, control_every: int = 1, camera: CameraModel | None = None,
     output_key: str = "output", stroke: StrokeLimits | None = None, l0: float = 0.0,
     ukf_kw: Mapping[str, Any] | None = None,
@@ -679,7 +574,7 @@ def run_ame_pd(
     """Velocity-command tracking of ``desired`` (angles) by pulling the tendon (the command is
     the pull position, integrated from the controller's velocity).
 
-    PD: ``v = kp e + kd (e - e_prev)/Ts`` (eq. 21) - pass ``params=None`` or ``kc=0``.
+    PD: ``v = kp e + kd (e - e_prev)/Ts`` (eq. 21) - pass ``reference=None`` or ``kc=0``.
     AME-PD: ``+ kc * e_hat_{k+1}`` (eq. 24-25), the error predicted one controller period ahead
     by the UKF-enhanced reference model (eq. 22-23). The controller runs every
     ``control_every`` ticks (Ts = control_every * dt_s) on the newest measurement (``camera``
@@ -692,7 +587,7 @@ def run_ame_pd(
     lim = stroke or StrokeLimits()
     ts = dt_s * control_every
     cam = _Camera(camera or CameraModel(rate_hz=None), dt_s)
-    use_ame = params is not None and kc != 0.0
+    use_ame = reference is not None and kc != 0.0
     n = yd.size
     u = np.empty(n)
     y = np.empty(n)
@@ -703,8 +598,7 @@ def run_ame_pd(
     v = 0.0
     e_prev: float | None = None
     latest: float | None = None
-    ukf: ModelErrorUKF | None = None
-    l_at_ctrl = pull
+    ukf: ActiveModelUKF | None = None
     for k in range(n):
         u[k] = pull
         y[k] = _output(step(float(pull)), output_key)
@@ -713,21 +607,21 @@ def run_ame_pd(
             latest = got[1]
             seen[k] = latest
         if k % control_every == 0 and latest is not None:
-            if use_ame and params is not None:
+            a_est, fh = latest, 0.0
+            if use_ame and reference is not None:
                 if ukf is None:
-                    ukf = ModelErrorUKF(params, dt_s=ts, alpha0=latest, **dict(ukf_kw or {}))
+                    ukf = model_error_ukf(reference, dt_s=ts, **dict(ukf_kw or {}))
+                    ukf.reset(float(pull), y0=latest)
                 else:
-                    # Time update over the last control period with the velocity applied.
-                    ukf.predict(l_at_ctrl, (pull - l_at_ctrl) / ts)
-                    ukf.update(latest)
-                est_log[k], fh_log[k] = ukf.x
-            l_at_ctrl = pull
+                    # time update over the last control period (the pull it moved), then the
+                    # newest measurement
+                    a_est, fh = ukf.step(float(pull), latest)
+                est_log[k], fh_log[k] = a_est, fh
             e = float(yd[k]) - latest
             v = kp * e + (kd * (e - e_prev) / ts if e_prev is not None else 0.0)
             e_prev = e
-            if use_ame and ukf is not None and params is not None:
-                a_est, fh = float(ukf.x[0]), float(ukf.x[1])
-                a_hat = a_est + ts * (params.rate(a_est, pull, v) + fh)
+            if use_ame and reference is not None:
+                a_hat = a_est + ts * (reference.rate(a_est, pull, v) + fh)
                 e_hat = float(yd[min(k + control_every, n - 1)]) - a_hat
                 v = v + kc * e_hat
         pull = lim.clip(pull + v * dt_s)

@@ -37,14 +37,13 @@ import numpy as np
 import pandas as pd
 
 from hysteresis.base import HysteresisError, check_inverse_reach, make_family
+from hysteresis.coleman_hodgdon import ColemanHodgdonModel
 from hysteresis.compensation import (
     CameraModel,
     LoopResult,
     StrokeLimits,
     camera_frames,
-    ch_simulate,
     estimate_model_error,
-    fit_coleman_hodgdon_ga,
     gamma_inverse,
     mixed_sine_profile,
     play_bank_from,
@@ -536,8 +535,6 @@ def _segment_pull(lo: float, hi: float, v: float,
 
 def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, seed: int,
                 progress: bool) -> dict[str, pd.DataFrame]:
-    from hysteresis.compensation import CHParams
-
     phi, r = map(float, cfg["configuration"])
     rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=phi, radius_mm=r,
                            effects=dict(cfg.get("effects") or {}) or None, seed=seed,
@@ -558,10 +555,11 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
     # GA identification of the reference model (eq. 26) on the widest segment.
     widest = max(segs, key=lambda k: float(np.ptp(segs[k][0])))
     l_id, a_id = segs[widest]
-    stride = max(1, l_id.size // int(cfg["ga"]["max_samples"]))
-    ref = fit_coleman_hodgdon_ga(l_id[::stride], a_id[::stride], seed=seed,
-                                 maxiter=int(cfg["ga"]["maxiter"]),
-                                 popsize=int(cfg["ga"]["popsize"]))
+    # the paper's form: GA (B < 0) and the explicit step of eq. 16 the UKF predicts with
+    ref = ColemanHodgdonModel(method="ga", scheme="euler", seed=seed,
+                              fit_max_samples=int(cfg["ga"]["max_samples"]),
+                              maxiter=int(cfg["ga"]["maxiter"]),
+                              popsize=int(cfg["ga"]["popsize"])).fit(l_id, a_id)
     ukf_kw = {"P0": tuple(cfg["ukf"]["P0"]), "Q": tuple(cfg["ukf"]["Q"]),
               "R": float(cfg["ukf"]["R"])}
     est_rows = []
@@ -612,16 +610,15 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
 
         fig, ax = plt.subplots(1, len(segs), figsize=(12, 3.5))
         for a, (name, (pull, alpha)) in zip(np.atleast_1d(ax), segs.items(), strict=True):
-            model = ch_simulate(ref, pull, alpha0=float(alpha[0]))
+            model = ref.predict(pull, state={"u": float(pull[0]), "y": float(alpha[0])})
             a.plot(pull, alpha, lw=0.8, label="measured")
             a.plot(pull, model, lw=0.8, label="CH reference")
             a.set(title=f"pull {name} mm", xlabel="pull [mm]", ylabel="tip angle [deg]")
         np.atleast_1d(ax)[0].legend(fontsize=7)
         fig.tight_layout()
         art.figure("seed000_reference_model", fig)
-    ref_row = pd.DataFrame([{"A": ref.A, "B": ref.B, "C": ref.C, "O_l": ref.O_l,
-                             "O_alpha": ref.O_alpha, "identified_on": widest}])
-    _ = CHParams  # the type of ``ref``
+    ref_row = pd.DataFrame([{"A": ref.A_, "B": ref.B_, "C": ref.C_, "O_l": ref.origin_u_,
+                             "O_alpha": ref.origin_y_, "identified_on": widest}])
     return {"seed000_reference": ref_row, "seed000_estimation": pd.DataFrame(est_rows),
             "seed000_tracking": pd.DataFrame(track_rows)}
 

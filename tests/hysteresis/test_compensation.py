@@ -14,19 +14,17 @@ import numpy as np
 import pytest
 
 from hysteresis.base import HysteresisError
+from hysteresis.coleman_hodgdon import ColemanHodgdonModel, ch_simulate
 from hysteresis.compensation import (
     GAMMA_METHODS,
     CameraModel,
-    CHParams,
     FamilyStepper,
     PlayBank,
     StrokeLimits,
     _Camera,
     as_stepper,
     camera_frames,
-    ch_simulate,
     estimate_model_error,
-    fit_coleman_hodgdon_ga,
     fit_play_bank,
     gamma_inverse,
     gamma_step_inverse,
@@ -62,26 +60,25 @@ class BacklashPlant:
 
 
 class CHPlant:
-    def __init__(self, p: CHParams, *, noise: float = 0.0, seed: int = 0) -> None:
+    """The paper's explicit step of eq. 16, one pull at a time, from the loop's centre line."""
+
+    def __init__(self, p: ColemanHodgdonModel, *, noise: float = 0.0, seed: int = 0) -> None:
         self.p = p
-        self.alpha: float | None = None
-        self.pull = 0.0
+        self.state: dict[str, float] | None = None
         self.noise = noise
         self.rng = np.random.default_rng(seed)
 
     def __call__(self, pull: float) -> dict[str, float]:
-        p = self.p
-        if self.alpha is None:
-            self.alpha, self.pull = p.O_alpha + p.C * (pull - p.O_l), pull
-        dl = pull - self.pull
-        back = p.C * (self.pull - p.O_l) - (self.alpha - p.O_alpha)
-        self.alpha += p.A * abs(dl) * back + p.B * dl
-        self.pull = pull
-        return {"output": self.alpha + self.noise * float(self.rng.standard_normal())}
+        alpha, self.state = self.p.step(pull, self.state)
+        return {"output": alpha + self.noise * float(self.rng.standard_normal())}
 
 
-TRUTH = CHParams(0.95, -0.92, 18.53, 0.0, 50.0)  # seed 000's identified [A, B, C]
-REFERENCE = CHParams(0.7, -0.5, 16.0, 0.0, 45.0)  # a deliberately wrong reference model
+def ch(A: float, B: float, C: float, o_alpha: float) -> ColemanHodgdonModel:
+    return ColemanHodgdonModel.from_params(A, B, C, origin=(0.0, o_alpha), scheme="euler")
+
+
+TRUTH = ch(0.95, -0.92, 18.53, 50.0)  # seed 000's identified [A, B, C]
+REFERENCE = ch(0.7, -0.5, 16.0, 45.0)  # a deliberately wrong reference model
 
 
 @pytest.fixture(scope="module")
@@ -241,9 +238,9 @@ def _triangle_pull(top: float, bottom: float = 0.0, v: float = 0.125) -> np.ndar
 
 def test_ch_simulate_has_the_backlash_width_of_eq_10() -> None:
     pull = _triangle_pull(10.0)
-    a = ch_simulate(TRUTH, pull)
+    a = TRUTH.predict(pull)
     # Away from the reversals both branches sit (C - B)/A off the line C pull (eq. 10 at rest).
-    width = (TRUTH.C - TRUTH.B) / TRUTH.A
+    width = (TRUTH.C_ - TRUTH.B_) / TRUTH.A_
     up = int(np.argmin(np.abs(pull[: pull.size // 2] - 5.0)))
     down = pull.size - 1 - up
     assert a[down] - a[up] == pytest.approx(2 * width, rel=0.02)
@@ -251,10 +248,11 @@ def test_ch_simulate_has_the_backlash_width_of_eq_10() -> None:
 
 def test_ga_identification_recovers_the_reference_model() -> None:
     pull = _triangle_pull(6.0)[::10]
-    a = ch_simulate(TRUTH, pull)
-    fit = fit_coleman_hodgdon_ga(pull, a, maxiter=40, seed=1)
-    assert fit.C == pytest.approx(TRUTH.C, rel=0.02)
-    assert np.sqrt(np.mean((ch_simulate(fit, pull, alpha0=float(a[0])) - a) ** 2)) < 1.0
+    a = ch_simulate(pull, *TRUTH.params_, origin=(0.0, 50.0), scheme="euler")
+    fit = ColemanHodgdonModel(method="ga", scheme="euler", maxiter=40, seed=1).fit(pull, a)
+    assert fit.C_ == pytest.approx(TRUTH.C_, rel=0.02) and fit.B_ < 0  # the paper's bound
+    back = fit.predict(pull, state={"u": float(pull[0]), "y": float(a[0])})
+    assert np.sqrt(np.mean((back - a) ** 2)) < 1.0
 
 
 def test_ukf_active_estimation_removes_most_of_the_model_error() -> None:

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from hysteresis import make_family
+from hysteresis.coleman_hodgdon import ColemanHodgdonModel
 from hysteresis.compensation import (
     CameraModel,
     StrokeLimits,
-    fit_coleman_hodgdon_ga,
     mixed_sine_profile,
     reduction,
     run_ame_pd,
@@ -76,7 +76,8 @@ def test_pd_and_ame_pd_are_stable_on_the_virtual_bending_joint() -> None:
     pull = np.concatenate([np.arange(0.0, 6.0, 0.5 * DT), np.arange(6.0, 0.0, -0.5 * DT)])
     angle = run_open_loop(_fresh(rig), pull, desired=pull,  # type: ignore[arg-type]
                           output_key="tip_angle_deg").output
-    ref = fit_coleman_hodgdon_ga(pull[::4], angle[::4], maxiter=25, popsize=10)
+    ref = ColemanHodgdonModel(method="ga", scheme="euler", maxiter=25,
+                              popsize=10).fit(pull[::4], angle[::4])
     t = np.arange(0.0, 60.0, DT)
     yd = seed000_target(t)
     yd = np.concatenate([np.linspace(0.0, yd[0], 500), yd])  # 5 s lead-in from rest
