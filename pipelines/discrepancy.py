@@ -311,6 +311,11 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     report["base_params"] = base_params
     report["run_choice"] = run_choice or None
     report["base_selection"] = auto_scores or None
+    report["base_misfit"] = None
+    if not auto_scores and cfg.get("base_check", True):
+        report["base_misfit"] = base_misfit(
+            runs, report, dict(cfg.get("auto_families") or {}),
+            factor=float(cfg.get("base_misfit_factor", 1.5)))
     report["source"] = str(Path(str(cfg["source"])).resolve())
     report["ingest"] = {"accepted": ingest_rep["n_accepted"], "rejected": ingest_rep["rejected"]}
     report["headline"] = headline(report)
@@ -324,12 +329,39 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     return report
 
 
+def base_misfit(runs: list[RunData], report: Mapping[str, Any],
+                families: Mapping[str, Mapping[str, Any]], *,
+                factor: float) -> dict[str, Any] | None:
+    """A chosen base that fits the source ``factor`` x worse held out than the best standard
+    family: the terms the workflow adds may then stand in for the base's own misfit (a
+    sum-to-one play sum on a Bouc-Wen-shaped loop gets an "asymmetry"). ``None`` if it fits."""
+    try:
+        _, _, scores = choose_base(runs, families)
+    except DiscrepancyError:
+        return None
+    best = min(scores, key=scores.__getitem__)
+    own = float(report["summary"]["heldout_rmse_before"])
+    ratio = own / scores[best] if scores[best] > 0 else float("inf")
+    if ratio <= factor:
+        return None
+    log.warning("base %s fits this source %.1fx worse held out than %s (%.4g vs %.4g): the "
+                "effects named may stand in for the base's misfit; base_family=auto picks "
+                "the best", report["base_family"], ratio, best, own, scores[best])
+    return {"base": report["base_family"], "heldout_rmse": own, "best_family": best,
+            "best_heldout_rmse": scores[best], "ratio": ratio, "scores": scores}
+
+
 def headline(report: Mapping[str, Any]) -> str:
     """One sentence: which effect was added and by how much it cut the held-out error (and
     which effects the load cells show that the model already reproduces)."""
     measured = [m["name"] for m in report.get("measured_within_reach", [])]
     also = (f"; the load cells also show {', '.join(measured)}, already reproduced by the "
             "model (named, not added)") if measured else ""
+    misfit = report.get("base_misfit")
+    if misfit:
+        also += (f"; caution: base {misfit['base']} fits this source {misfit['ratio']:.1f}x "
+                 f"worse held out than {misfit['best_family']}, so what is named may be the "
+                 "base's misfit (base_family=auto picks the best)")
     if not report["effects"]:
         return (f"no missing effect: no candidate term beats the noise on the held-out runs "
                 f"(base {report['base_family']}, held-out RMSE "
@@ -371,6 +403,8 @@ def _track(cfg: Mapping[str, Any], report: Mapping[str, Any], report_path: Path,
             }
             for i, e in enumerate(report["effects"]):
                 metrics[f"effect{i + 1}.heldout_rmse_after"] = e["heldout_rmse_after"]
+            if report.get("base_misfit"):
+                metrics["base_misfit_ratio"] = report["base_misfit"]["ratio"]
             params = {"source": report["source"], "base_family": report["base_family"],
                       "base_params": json.dumps(report["base_params"]),
                       "effects": ",".join(e["name"] for e in report["effects"]) or "none",
