@@ -9,7 +9,7 @@ pair, not only pooled.
 Strengths: 1 = the rig's nominal size (docs/virtual-rig.md has the physical meaning and the
 range we take as realistic for each). The smallest strength at which each effect is named first
 and halved, on five configuration pairs, is what ``make discrepancy-study`` measures
-(docs/discrepancy.md); the cases below sit at or above those limits.
+(docs/notes/discrepancy-measurements.md); the cases below sit at or above those limits.
 """
 
 from __future__ import annotations
@@ -149,7 +149,7 @@ def test_tendon_elongation_is_named_where_the_tension_is_high():
     # 8-16 = extra strain 5e-6 x s x T^2 (0.4-0.8 % at 10 N): a braided polymer tendon; 1-2 a
     # metal cable's constructional stretch. The stretch goes with T^2, so it shows where the
     # wrap (and the tension) is large: on this pair named first from 2, not at 1; halved in
-    # both 90 deg configurations at 12 (docs/discrepancy.md).
+    # both 90 deg configurations at 12 (docs/notes/discrepancy-measurements.md).
     e12 = report({"tendon_elongation": 12.0}, pair="e")
     assert first(e12)["name"] == "tendon_elongation"
     assert min(per_config_reduction(e12).values()) >= 0.5
