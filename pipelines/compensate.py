@@ -242,6 +242,18 @@ class Artifacts:
         return path
 
 
+@dataclass
+class Figures:
+    """The figures an experiment made, by name; :func:`run` writes them (the experiments
+    themselves compute, they do not write)."""
+
+    plots: bool = True
+    made: dict[str, Any] = field(default_factory=dict)
+
+    def figure(self, name: str, fig: Any) -> None:
+        self.made[name] = fig
+
+
 def plot_runs(title: str, runs: Mapping[str, LoopResult]) -> Any:
     """Desired vs measured, the input-output loops, and the error over time."""
     import matplotlib
@@ -324,7 +336,7 @@ def fit_shape_aware(cfg: Mapping[str, Any], backend: RigBackend, u_id_cmd: np.nd
     return sa, [f"{phi:g}/{r:g}" for phi, r in train]
 
 
-def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, seed: int,
+def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, seed: int,
                 progress: bool) -> dict[str, pd.DataFrame]:
     stroke = StrokeLimits(*map(float, cfg["stroke"]))
     ident = dict(cfg["identification"])
@@ -409,9 +421,9 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
                 runs["shape_aware"] = dataclasses.replace(res, scheme="shape_aware")
             for res in runs.values():
                 rows.append(_stats_row(res, **keys))
-            if depth == "full" and art.plots:
+            if depth == "full" and figs.plots:
                 show = {k: v for k, v in runs.items() if k in ("none", cfg["paper_family"], "ours")}
-                art.figure(f"seed001_{label}_{prof}",
+                figs.figure(f"seed001_{label}_{prof}",
                            plot_runs(f"seed 001 shape {label} ({phi:g} deg, {r:g} mm) - {prof}",
                                      show))
             if depth == "full" and timing_cfg.get("enabled", True):
@@ -459,7 +471,7 @@ def _camera_estimate(rec_t: np.ndarray, truth: np.ndarray, cam: CameraModel) -> 
     return np.asarray(np.interp(rec_t, rec_t[ok], frames[ok]), dtype=np.float64)
 
 
-def run_seed002(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, seed: int,
+def run_seed002(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, seed: int,
                 progress: bool) -> dict[str, pd.DataFrame]:
     cam_cfg = dict(cfg["camera"])
     cal = dict(cfg["calibration"])
@@ -513,8 +525,8 @@ def run_seed002(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
                 meas_var=float(cfg["ours"]["meas_var"]))
             for res in runs.values():
                 rows.append(_stats_row(res, skip_s=lead, **keys))
-            if trial == 0 and art.plots and sig in ("P(0.5)", "N-P"):
-                art.figure(f"seed002_{case}_{sig.replace('(', '').replace(')', '')}",
+            if trial == 0 and figs.plots and sig in ("P(0.5)", "N-P"):
+                figs.figure(f"seed002_{case}_{sig.replace('(', '').replace(')', '')}",
                            plot_runs(f"seed 002 {case} ({phi} deg, {r} mm) - {sig}", runs))
     return {"seed002_table1": pd.DataFrame(rows)}
 
@@ -533,7 +545,7 @@ def _segment_pull(lo: float, hi: float, v: float,
     return np.concatenate([pre, dwell, seg]), pre.size + dwell.size
 
 
-def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, seed: int,
+def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, seed: int,
                 progress: bool) -> dict[str, pd.DataFrame]:
     phi, r = map(float, cfg["configuration"])
     rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=phi, radius_mm=r,
@@ -604,8 +616,8 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
                            "var": s["var_error"], "rmse": s["rmse"],
                            "command_travel": command_travel(res),
                            "note": note if res.scheme == "ours" else ""})
-    if art.plots:
-        art.figure("seed000_tracking", plot_runs("seed 000 eq. 32 tracking", runs))
+    if figs.plots:
+        figs.figure("seed000_tracking", plot_runs("seed 000 eq. 32 tracking", runs))
         import matplotlib.pyplot as plt
 
         fig, ax = plt.subplots(1, len(segs), figsize=(12, 3.5))
@@ -616,7 +628,7 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, art: Artifacts, *, 
             a.set(title=f"pull {name} mm", xlabel="pull [mm]", ylabel="tip angle [deg]")
         np.atleast_1d(ax)[0].legend(fontsize=7)
         fig.tight_layout()
-        art.figure("seed000_reference_model", fig)
+        figs.figure("seed000_reference_model", fig)
     ref_row = pd.DataFrame([{"A": ref.A_, "B": ref.B_, "C": ref.C_, "O_l": ref.origin_u_,
                              "O_alpha": ref.origin_y_, "identified_on": widest}])
     return {"seed000_reference": ref_row, "seed000_estimation": pd.DataFrame(est_rows),
@@ -803,6 +815,7 @@ def run(cfg: Mapping[str, Any], *, backend: RigBackend | None = None) -> dict[st
     out_dir = Path(str(cfgd["out_dir"]))
     clean_leftovers(out_dir)  # temporaries of a killed compensate
     art = Artifacts(out_dir, plots=bool(cfgd.get("plots", True)))
+    figs = Figures(plots=art.plots)
     seed = int(cfgd.get("seed", 0))
     progress = bool(cfgd.get("progress", True))
     tables: dict[str, pd.DataFrame] = {}
@@ -820,10 +833,13 @@ def run(cfg: Mapping[str, Any], *, backend: RigBackend | None = None) -> dict[st
                                        ).tracking_uri
             sub = {**sub, "ours": {**sub["ours"], "tracking_uri": uri}}
         t1 = time.perf_counter()
-        tables.update(fn(sub, backend, art, seed=seed, progress=progress))
+        tables.update(fn(sub, backend, figs, seed=seed, progress=progress))
         log.info("%s done in %.1f s", name, time.perf_counter() - t1)
+    # the edge: everything the experiments computed is written here
     for name, frame in tables.items():
         art.table(name, frame)
+    for name, fig in figs.made.items():
+        art.figure(name, fig)
     metrics = headline(tables, cfgd)
     elapsed = time.perf_counter() - t0
     report = write_report(tables, cfgd, Path(str(cfgd["report"])), metrics, elapsed)
