@@ -42,7 +42,7 @@ from hysteresis.base import HysteresisError, as_1d, check_inverse_reach
 from hysteresis.coleman_hodgdon import ColemanHodgdonModel
 from hysteresis.metrics import error_statistics
 from hysteresis.play import gamma_simulate, play_matrix
-from hysteresis.ukf import ActiveModelUKF
+from hysteresis.ukf import PAPER_P0, PAPER_Q0, PAPER_R0, ActiveModelUKF
 
 FloatArray = npt.NDArray[np.float64]
 StepFn = Callable[[float], Mapping[str, float]]
@@ -511,8 +511,8 @@ def run_vision_feedback(
 # UKF active estimation of the model error (seed 000 eq. 12-18): the reference model is the
 # Coleman-Hodgdon family (hysteresis.coleman_hodgdon), the filter hysteresis.ukf's
 # ---------------------------------------------------------------------------------------------
-#: Seed 000 eq. 29 as diagonals: P0 = diag(10, 10), Q = diag(5, 15), R = 1e-4 (deg^2).
-UKF_DEFAULTS: dict[str, Any] = {"P0": (10.0, 10.0), "Q": (5.0, 15.0), "R": 1e-4}
+#: Seed 000 eq. 29, as the UKF module has them.
+UKF_DEFAULTS: dict[str, Any] = {"P0": PAPER_P0, "Q": PAPER_Q0, "R": PAPER_R0}
 
 
 def model_error_ukf(reference: ColemanHodgdonModel, *, dt_s: float,
@@ -587,7 +587,7 @@ def run_ame_pd(
     lim = stroke or StrokeLimits()
     ts = dt_s * control_every
     cam = _Camera(camera or CameraModel(rate_hz=None), dt_s)
-    use_ame = reference is not None and kc != 0.0
+    ame = reference if kc != 0.0 else None  # None: plain PD
     n = yd.size
     u = np.empty(n)
     y = np.empty(n)
@@ -608,9 +608,9 @@ def run_ame_pd(
             seen[k] = latest
         if k % control_every == 0 and latest is not None:
             a_est, fh = latest, 0.0
-            if use_ame and reference is not None:
+            if ame is not None:
                 if ukf is None:
-                    ukf = model_error_ukf(reference, dt_s=ts, **dict(ukf_kw or {}))
+                    ukf = model_error_ukf(ame, dt_s=ts, **dict(ukf_kw or {}))
                     ukf.reset(float(pull), y0=latest)
                 else:
                     # time update over the last control period (the pull it moved), then the
@@ -620,12 +620,12 @@ def run_ame_pd(
             e = float(yd[k]) - latest
             v = kp * e + (kd * (e - e_prev) / ts if e_prev is not None else 0.0)
             e_prev = e
-            if use_ame and reference is not None:
-                a_hat = a_est + ts * (reference.rate(a_est, pull, v) + fh)
+            if ame is not None:
+                a_hat = a_est + ts * (ame.rate(a_est, pull, v) + fh)
                 e_hat = float(yd[min(k + control_every, n - 1)]) - a_hat
                 v = v + kc * e_hat
         pull = lim.clip(pull + v * dt_s)
-    scheme = "ame_pd" if use_ame else "pd"
+    scheme = "ame_pd" if ame is not None else "pd"
     return LoopResult(scheme, _ticks(n, dt_s), yd, u, y, seen,
                       {"f_h": fh_log, "alpha_est": est_log})
 

@@ -294,7 +294,8 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         noise_factor=float(wf.get("noise_factor", 2.0)),
         physical_evidence=bool(wf.get("physical_evidence", True)),
         pair_search=bool(wf.get("pair_search", True)),
-        pair_pool=None if wf.get("pair_pool", 3) is None else int(wf.get("pair_pool", 3)),
+        pair_pool=None if (pool := wf.get("pair_pool", WorkflowSettings.pair_pool)) is None
+        else int(pool),
         joint_retune=bool(wf.get("joint_retune", True)),
         clean_factor=float(wf.get("clean_factor", WorkflowSettings.clean_factor)),
         progress=progress,
