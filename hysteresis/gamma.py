@@ -238,8 +238,9 @@ class GammaModel(StatefulModel):
                   ) -> tuple[float, FloatArray, FloatArray, float, float]:
         """(SSE, thresholds, solution, multiplier, start position) of the best candidate.
 
-        The widest play is chosen first (every play starting as the thesis assumes), then the
-        start position at that width. A start position other than the first must lower the
+        Width and start position are chosen together: a wide loop screened with every play
+        at the wrong start misfits the first stroke and loses to a narrower one that should
+        not win. At each width, a start position other than the first must lower the
         squared error by :data:`START_GAIN`: a clean record that starts where the thesis
         assumes keeps it, so the fits of a campaign's shapes stay comparable (the shape-aware
         model regresses their weights), while a record that clearly starts elsewhere gets its
@@ -250,10 +251,15 @@ class GammaModel(StatefulModel):
         positions = self._positions()
         u0 = float(uu[0])
         if len(spans) > 1 or len(positions) > 1:
-            p = min(spans, key=lambda c: self._screen(uu, yy, c, positions[0]))
-            scores = [self._screen(uu, yy, p, pos) for pos in positions]
-            k = int(np.argmin(scores))
-            pos = positions[k] if scores[k] <= (1.0 - START_GAIN) * scores[0] else positions[0]
+            screened: list[tuple[float, int, float]] = []
+            for i, c in enumerate(spans):
+                scores = [self._screen(uu, yy, c, pos) for pos in positions]
+                k = int(np.argmin(scores))
+                if scores[k] > (1.0 - START_GAIN) * scores[0]:
+                    k = 0
+                screened.append((scores[k], i, positions[k]))
+            _, i, pos = min(screened)
+            p = spans[i]
         else:
             p, pos = spans[0], positions[0]
         plays = play_matrix(uu, p, self._start(u0, p, pos))[0]

@@ -173,9 +173,11 @@ def fit_reachable(name: str, u: np.ndarray, y: np.ndarray, params: Mapping[str, 
     """Fit ``name`` and check that its inverse can reach what it will be asked for.
 
     A weighted-play fit whose thresholds reach the identification input's span (or whose total
-    weight is <= 0) is refused by :func:`hysteresis.base.check_inverse_reach`; it is then
-    refitted with ``max_threshold`` at 3/4, 1/2, 1/4 of that span (the widest play must still
-    reverse inside the record) until one passes; if none does, the last refusal is raised and
+    weight is <= 0) is refused by :func:`hysteresis.base.check_inverse_reach`; unless its
+    thresholds were given explicitly, it is then refitted with ``max_threshold`` at 3/4, 1/2,
+    1/4 of that span (the widest play must reverse inside the record; the default widths may
+    reach the whole span, which predicts a lagging output well but leaves the widest play
+    unidentified for an inverse) until one passes; if none does, the last refusal is raised and
     nothing is driven with it. Returns ``(model, note)``; ``note`` says what was refused and
     what was changed ("" when the first fit passed).
     """
@@ -185,13 +187,14 @@ def fit_reachable(name: str, u: np.ndarray, y: np.ndarray, params: Mapping[str, 
         check_inverse_reach(model, identified_range=span)
         return model, ""
     except HysteresisError as exc:
-        if "max_threshold" not in params:
+        if params.get("thresholds") is not None:
             raise
         note = f"{label}: {exc}"
     width = span[1] - span[0]
     log.warning("%s; refitting with narrower plays", note)
+    given = params.get("max_threshold")
     for frac in (0.75, 0.5, 0.25):
-        top = min(float(params["max_threshold"]), frac * width)
+        top = frac * width if given is None else min(float(given), frac * width)
         model = _fit_family(name, u, y, {**dict(params), "max_threshold": top})
         try:
             check_inverse_reach(model, identified_range=span)

@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
 
+from hysteresis import make_family
 from hysteresis.coleman_hodgdon import ColemanHodgdonModel
 from hysteresis.compensation import sine_profile
 from pipelines import compensate
@@ -154,6 +155,18 @@ def test_an_unreachable_fit_is_refitted_with_narrower_plays() -> None:
                                         label="test")
     assert none == "" and ok.thresholds_.max() == 1.0
 
+
+
+def test_a_default_fit_whose_plays_reach_the_span_is_refitted_for_the_inverse() -> None:
+    """A lag of a good fraction of a period makes the default Gamma widths reach the whole
+    input span (best for prediction); for an inverse that fit is refused and narrowed."""
+    t = np.arange(0.0, 80.0, 0.01)
+    u = 28.0 * np.sin(2 * np.pi * 0.1 * t + 0.5) + 30.0
+    y = 0.9 * 28.0 * np.sin(2 * np.pi * 0.1 * (t - 0.9) + 0.5) + 30.0
+    assert make_family("gamma").fit(u, y).thresholds_.max() >= np.ptp(u) * (1 - 1e-9)
+    model, note = compensate.fit_reachable("gamma", u, y, {}, label="lagged")
+    assert "reach the identification range" in note and "refitted with max_threshold=" in note
+    assert model.thresholds_.max() <= 0.75 * float(np.ptp(u)) + 1e-9
 
 def test_quick_seed000_ours_is_not_worse_than_pd_on_the_virtual_rig(tmp_path: Path) -> None:
     cfg = _cfg(tmp_path, "tracking=off", "plots=false", "seed001.enabled=false",
