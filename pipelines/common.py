@@ -35,8 +35,11 @@ def sweep_id() -> str:
 def _register_resolvers() -> None:
     from omegaconf import OmegaConf
 
+    from pipelines import schemas
+
     if not OmegaConf.has_resolver("tsm_sweep_id"):
         OmegaConf.register_new_resolver("tsm_sweep_id", sweep_id, use_cache=True)
+    schemas.register()
 
 
 _register_resolvers()

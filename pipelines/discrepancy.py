@@ -19,6 +19,7 @@ import math
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -246,8 +247,63 @@ def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
 
 # -- the stage ------------------------------------------------------------------------------
 
+def workflow_settings(workflow: Mapping[str, Any] | None, *, progress: bool = False
+                      ) -> WorkflowSettings:
+    """The workflow's knobs: :class:`WorkflowSettings` (the one place of their defaults) with
+    the given fields replaced; an unknown field is an error, never ignored."""
+    values = dict(workflow or {})
+    known = {f.name for f in fields(WorkflowSettings)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise DiscrepancyError(f"unknown workflow setting(s) {unknown}; known: {sorted(known)}")
+    if values.get("candidates") is not None:
+        values["candidates"] = tuple(values["candidates"])
+    values["progress"] = progress
+    return replace(WorkflowSettings(), **values)
+
+
+def analyse(runs: list[RunData], *, base_family: str = "auto",
+            base_params: Mapping[str, Any] | None = None,
+            auto_families: Mapping[str, Mapping[str, Any]],
+            settings: WorkflowSettings | None = None, ukf_evidence: bool = False,
+            base_check: bool = True, base_misfit_factor: float = 1.5
+            ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The stage's computation, no I/O: choose the base (``auto``: the best of
+    ``auto_families``), run the workflow, check a given base against the auto families.
+    Returns ``(report, full)``: the JSON-ready report and the workflow's full result (with
+    the evaluations and groups the plots need)."""
+    base = base_family
+    params = dict(base_params or {})
+    auto_scores: dict[str, float] = {}
+    if base == "auto":
+        base, params, auto_scores = choose_base(runs, auto_families)
+    try:
+        factory = base_factory_for(base, **params)
+    except HysteresisError as err:
+        raise DiscrepancyError(str(err)) from None
+    model_error = None
+    if ukf_evidence:
+        try:
+            model_error = ukf_model_error(runs)
+        except HysteresisError as err:  # evidence only: never fatal
+            log.warning("UKF model-error evidence skipped: %s", err)
+    full = run_workflow(runs, factory, base_name=base, settings=settings or WorkflowSettings(),
+                        model_error=model_error)
+    report = strip_private(full)
+    report["base_params"] = params
+    report["base_selection"] = auto_scores or None
+    report["base_misfit"] = None
+    if not auto_scores and base_check:
+        report["base_misfit"] = base_misfit(runs, report, auto_families,
+                                            factor=base_misfit_factor)
+    report["headline"] = headline(report)
+    return report, full
+
+
 def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
-    """Run the stage from a plain config mapping; returns the JSON report (also written)."""
+    """Run the stage from a plain config mapping; returns the JSON report (also written).
+
+    The edges: ingest the source, :func:`analyse`, then plots, the report file and MLflow."""
     t0 = time.perf_counter()
     if not cfg.get("source"):
         raise DiscrepancyError("source=<dir of raw runs or bags> is required")
@@ -257,11 +313,11 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     clean_leftovers(report_path.parent, recursive=False)  # temporaries of a killed run
     clean_leftovers(report_path.parent / f"{report_path.stem}_plots")
     progress = bool(cfg.get("progress", True))
-    mapping = cfg.get("importer")
+    settings = workflow_settings(cfg.get("workflow"), progress=progress)
     clean_owned_temp(TEMP_TAG)  # work folders of killed runs
     with tempfile.TemporaryDirectory(prefix=owned_prefix(TEMP_TAG)) as tmp:
-        rows, meta, ingest_rep = ingest_source(cfg["source"], Path(tmp), mapping=mapping,
-                                               progress=progress)
+        rows, meta, ingest_rep = ingest_source(cfg["source"], Path(tmp),
+                                               mapping=cfg.get("importer"), progress=progress)
     sig = dict(cfg.get("signals") or {})
     runs = runs_from_dataset(
         rows, meta, identify_excitations=list(cfg.get("identify_excitations") or ["sine_decay"]),
@@ -275,51 +331,15 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         raise DiscrepancyError(str(err)) from None
     for key, note in run_choice.items():
         log.info("discrepancy: %s: %s", key, note)
-    base = str(cfg.get("base_family", "auto"))
-    base_params = dict(cfg.get("base_params") or {})
-    auto_scores: dict[str, float] = {}
-    if base == "auto":
-        base, base_params, auto_scores = choose_base(runs, dict(cfg.get("auto_families") or {}))
-    try:
-        factory = base_factory_for(base, **base_params)
-    except HysteresisError as err:
-        raise DiscrepancyError(str(err)) from None
-    wf = dict(cfg.get("workflow") or {})
-    settings = WorkflowSettings(
-        candidates=tuple(wf.get("candidates") or WorkflowSettings.candidates),
-        max_effects=int(wf.get("max_effects", 3)),
-        min_relative_gain=float(wf.get("min_relative_gain", 0.2)),
-        max_delta_bic=float(wf.get("max_delta_bic", -10.0)),
-        min_runs_improved=float(wf.get("min_runs_improved", 0.5)),
-        noise_factor=float(wf.get("noise_factor", 2.0)),
-        physical_evidence=bool(wf.get("physical_evidence", True)),
-        pair_search=bool(wf.get("pair_search", True)),
-        pair_pool=None if (pool := wf.get("pair_pool", WorkflowSettings.pair_pool)) is None
-        else int(pool),
-        joint_retune=bool(wf.get("joint_retune", True)),
-        clean_factor=float(wf.get("clean_factor", WorkflowSettings.clean_factor)),
-        progress=progress,
-    )
-    model_error = None
-    if cfg.get("ukf_evidence", False):
-        try:
-            model_error = ukf_model_error(runs)
-        except HysteresisError as err:  # evidence only: never fatal
-            log.warning("UKF model-error evidence skipped: %s", err)
-    full = run_workflow(runs, factory, base_name=base, settings=settings,
-                        model_error=model_error)
-    report = strip_private(full)
-    report["base_params"] = base_params
+    report, full = analyse(
+        runs, base_family=str(cfg.get("base_family", "auto")),
+        base_params=cfg.get("base_params"), auto_families=dict(cfg.get("auto_families") or {}),
+        settings=settings, ukf_evidence=bool(cfg.get("ukf_evidence", False)),
+        base_check=bool(cfg.get("base_check", True)),
+        base_misfit_factor=float(cfg.get("base_misfit_factor", 1.5)))
     report["run_choice"] = run_choice or None
-    report["base_selection"] = auto_scores or None
-    report["base_misfit"] = None
-    if not auto_scores and cfg.get("base_check", True):
-        report["base_misfit"] = base_misfit(
-            runs, report, dict(cfg.get("auto_families") or {}),
-            factor=float(cfg.get("base_misfit_factor", 1.5)))
     report["source"] = str(Path(str(cfg["source"])).resolve())
     report["ingest"] = {"accepted": ingest_rep["n_accepted"], "rejected": ingest_rep["rejected"]}
-    report["headline"] = headline(report)
     plots = plot_report(full, report_path.parent / f"{report_path.stem}_plots") \
         if cfg.get("plots", True) else []
     report["plots"] = [str(p) for p in plots]

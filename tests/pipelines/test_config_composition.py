@@ -95,3 +95,25 @@ def test_pipeline_forwards_shared_values_to_each_stage(tmp_path: Path) -> None:
     assert rep_cfg["fit_excitation"] == "sine_decay"
     ing = OmegaConf.create(stage_config("report", pipeline))
     assert ing.paths.reports == str(tmp_path / "data" / "reports")
+
+
+def test_discrepancy_workflow_is_a_typed_node_with_its_defaults_in_one_place() -> None:
+    from dataclasses import asdict
+
+    from hydra.errors import ConfigCompositionException
+
+    from hysteresis.discrepancy.workflow import WorkflowSettings
+    from pipelines.discrepancy import DiscrepancyError, workflow_settings
+
+    plain = to_container(_compose("discrepancy", ["workflow.max_effects=2"]))
+    defaults = asdict(WorkflowSettings())
+    assert set(plain["workflow"]) == set(defaults)
+    settings = workflow_settings(plain["workflow"], progress=True)
+    assert settings == WorkflowSettings(max_effects=2, progress=True)
+    for bad in ("workflow.max_efects=2", "workflow.max_effects=two"):
+        with pytest.raises(ConfigCompositionException):
+            _compose("discrepancy", [bad])
+    # a forced addition composes, and the stage refuses it
+    forced = to_container(_compose("discrepancy", ["+workflow.max_efects=2"]))["workflow"]
+    with pytest.raises(DiscrepancyError, match=r"unknown workflow setting\(s\) \['max_efects'\]"):
+        workflow_settings(forced)
