@@ -129,8 +129,10 @@ def gamma_invert_exact(
         if b <= v_prev:
             continue
         fb = gamma_at(b, w, p, q, offset) - y_d
-        if fa * fb <= 0.0:
-            right = a + (b - a) * fa / (fa - fb)
+        # signs, not the product: the product of two tiny values underflows to 0
+        if (fa <= 0.0 <= fb) or (fb <= 0.0 <= fa):
+            den = fa - fb
+            right = a if den == 0.0 else a + (b - a) * fa / den
             found = True
             break
         a, fa = b, fb
@@ -147,8 +149,9 @@ def gamma_invert_exact(
         if b >= v_prev:
             continue
         fb = gamma_at(b, w, p, q, offset) - y_d
-        if fa * fb <= 0.0:
-            left = a + (b - a) * fa / (fa - fb)
+        if (fa <= 0.0 <= fb) or (fb <= 0.0 <= fa):
+            den = fa - fb
+            left = a if den == 0.0 else a + (b - a) * fa / den
             found = True
             break
         a, fa = b, fb
