@@ -90,9 +90,7 @@ def run() -> dict[str, Any]:
     # -- Gamma inverse per step: ours vs the thesis' bounded scalar search ----------------
     inv: dict[str, Any] = {}
     for shape in ((90, 30), (60, 60)):
-        gm = GammaModel()
-        gm.thresholds_, gm.weights_, gm.offset_ = p.copy(), rows[shape].copy(), 0.0
-        gm.lagrange_multiplier_, gm.sse_, gm.n_samples_ = float("nan"), 0.0, 0
+        gm = GammaModel.from_params(p, rows[shape])
         yd = mixed_sine(2000)
         gm.invert(yd[:5])
         gm.invert_step(float(yd[0]))
@@ -114,8 +112,7 @@ def run() -> dict[str, Any]:
         err_exact = float(np.max(np.abs(gm.predict(u_exact) - yd[:n_ref])))
         err_bounded = float(np.max(np.abs(gm.predict(u_bounded) - yd[:n_ref])))
         # monotone variant (all weights > 0): where the bounded search is reliable
-        pos = GammaModel()
-        pos.thresholds_, pos.weights_, pos.offset_ = p.copy(), np.full(11, 1 / 11), 0.0
+        pos = GammaModel.from_params(p, np.full(11, 1 / 11))
         ub = np.empty(n_ref)
         st = pos.initial_state()
         for k in range(n_ref):

@@ -106,9 +106,8 @@ def check_inverse_reach(model: Any, *, identified_range: tuple[float, float] | N
                         desired: Any = None) -> None:
     """Refuse, before anything is driven, an inverse that cannot reach what it is asked for.
 
-    Applies to weighted-play models (a Gamma family fit: ``weights_``/``thresholds_``; a
-    compensation ``PlayBank``: ``weights``/``plays``); other models pass. Raises
-    :class:`HysteresisError` naming the identification range when
+    Applies to weighted-play models (a Gamma family fit: ``weights_``/``thresholds_``); other
+    models pass. Raises :class:`HysteresisError` naming the identification range when
 
     * the total weight ``sum(Q)`` is <= 0: the outer slope of ``v -> Gamma(v)`` then points
       the wrong way (or nowhere), so outputs beyond the loop are unreachable and the nearest
@@ -118,8 +117,8 @@ def check_inverse_reach(model: Any, *, identified_range: tuple[float, float] | N
       identified (it only trades against the offset and the other weights) and the inverse
       relies on it beyond the data.
     """
-    q = getattr(model, "weights_", getattr(model, "weights", None))
-    p = getattr(model, "thresholds_", getattr(model, "plays", None))
+    q = getattr(model, "weights_", None)
+    p = getattr(model, "thresholds_", None)
     if q is None or p is None:
         return
     q = np.asarray(q, dtype=np.float64).ravel()

@@ -40,8 +40,8 @@ from scipy import optimize
 
 from hysteresis.base import HysteresisError, as_1d, check_inverse_reach
 from hysteresis.coleman_hodgdon import ColemanHodgdonModel
+from hysteresis.gamma import GammaModel, GammaState
 from hysteresis.metrics import error_statistics
-from hysteresis.play import gamma_simulate, play_matrix
 from hysteresis.ukf import PAPER_P0, PAPER_Q0, PAPER_R0, ActiveModelUKF
 
 FloatArray = npt.NDArray[np.float64]
@@ -49,9 +49,9 @@ StepFn = Callable[[float], Mapping[str, float]]
 
 __all__ = [
     "CameraModel", "FamilyStepper", "GAMMA_METHODS", "InverseStepper", "LoopResult",
-    "PlayBank", "PlayBankStepper", "StrokeLimits", "UKF_DEFAULTS", "as_stepper", "camera_frames",
-    "estimate_model_error", "fit_play_bank", "model_error_ukf",
-    "gamma_inverse", "gamma_step_inverse", "mixed_sine_profile", "play_bank_from", "reduction",
+    "StrokeLimits", "UKF_DEFAULTS", "as_stepper", "camera_frames",
+    "estimate_model_error", "model_error_ukf",
+    "gamma_inverse", "gamma_step_inverse", "mixed_sine_profile", "reduction",
     "run_ame_pd", "run_inverse_with_error_correction", "run_open_loop", "run_vision_feedback",
     "seed000_target", "seed002_motion", "segment_statistics", "sine_profile", "triangle_profile",
 ]
@@ -216,196 +216,110 @@ def run_open_loop(
 
 
 # ---------------------------------------------------------------------------------------------
-# The complex play operator Gamma_n (seed 001 eq. 4.8-4.9) and its per-step inverse
+# Table 4.4: the per-step inverse Gamma_k^{-1} of the complex play operator (seed 001 eq.
+# 4.8-4.9, the family hysteresis.gamma.GammaModel) by each LSQ_Opt solver and by ours
 # ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class PlayBank:
-    """Gamma_n: ``y = offset + sum_i q_i gamma_i(v)`` with play operators of plays ``p_i >= 0``.
-
-    Each operator follows eq. 4.8: its output stays in ``[v - p_i, v]`` and only moves when
-    pushed, ``w_i(k) = min(v, max(v - p_i, w_i(k-1)))``. ``scale`` maps the input first
-    (``v = scale * u``) so the operator can work in output units.
-    """
-
-    plays: FloatArray
-    weights: FloatArray
-    offset: float = 0.0
-
-    def __post_init__(self) -> None:
-        p = np.asarray(self.plays, dtype=np.float64)
-        q = np.asarray(self.weights, dtype=np.float64)
-        if p.ndim != 1 or p.shape != q.shape or p.size == 0:
-            raise HysteresisError(
-                f"plays and weights must be equal-length 1-D arrays, got {p.shape}, {q.shape}"
-            )
-        if np.any(p < 0) or not np.all(np.isfinite(p)) or not np.all(np.isfinite(q)):
-            raise HysteresisError("plays must be finite and >= 0 and weights finite")
-        object.__setattr__(self, "plays", p)
-        object.__setattr__(self, "weights", q)
-
-    def initial_state(self, v0: float = 0.0) -> FloatArray:
-        """Rest state at input ``v0`` (seed 001: W(1) = 0 at v = 0)."""
-        return np.full(self.plays.size, float(v0))
-
-    def step(self, v: float, state: FloatArray) -> tuple[float, FloatArray]:
-        new = np.minimum(v, np.maximum(v - self.plays, state))
-        return float(self.offset + self.weights @ new), new
-
-    def output_at(self, v: float, state: FloatArray) -> float:
-        """Output for input ``v`` from ``state`` without committing the move."""
-        return float(self.offset + self.weights @ np.minimum(v, np.maximum(v - self.plays, state)))
-
-    def predict(self, u: Any, *, state: FloatArray | None = None) -> FloatArray:
-        uu = as_1d(u, "u")
-        w = self.initial_state() if state is None else np.asarray(state, dtype=np.float64).copy()
-        return gamma_simulate(uu, self.plays, self.weights, float(self.offset), w)[0]
-
-    def basis(self, u: Any) -> FloatArray:
-        """Operator outputs ``(N, n)`` from rest; ``predict = offset + basis @ weights``."""
-        return play_matrix(as_1d(u, "u"), self.plays, self.initial_state())[0]
-
-
-def fit_play_bank(
-    u: Any, y: Any, *, plays: Sequence[float] | None = None, n: int = 11,
-    max_play: float | None = None,
-    ridge: float = 1e-6,
-) -> PlayBank:
-    """Least-squares weights (and an offset) of Gamma_n for the pair ``(u, y)`` (seed 001 eq.
-    4.10 without the sum-to-one constraint, which the thesis itself blames for its biased mean
-    error). Default plays: ``n`` equally spaced in ``[0, max_play]``, ``max_play`` a third of the
-    input's range."""
-    uu = as_1d(u, "u")
-    yy = as_1d(y, "y")
-    if uu.shape != yy.shape:
-        raise HysteresisError(f"u and y differ in length: {uu.size} vs {yy.size}")
-    if plays is None:
-        span = float(np.ptp(uu))
-        if span <= 0:
-            raise HysteresisError("u is constant; cannot choose play amounts")
-        top = span / 3.0 if max_play is None else float(max_play)
-        plays = list(np.linspace(0.0, top, n))
-    bank0 = PlayBank(np.asarray(plays, dtype=np.float64), np.zeros(len(plays)))
-    phi = np.column_stack([bank0.basis(uu), np.ones(uu.size)])
-    # A small ridge keeps nearly collinear operators from trading huge opposite weights.
-    gram = phi.T @ phi + ridge * float(np.trace(phi.T @ phi)) / phi.shape[1] * np.eye(phi.shape[1])
-    coef = np.linalg.solve(gram, phi.T @ yy)
-    return PlayBank(bank0.plays, coef[:-1], float(coef[-1]))
-
-
 GAMMA_METHODS = ("exact", "bounded", "nelder-mead", "slsqp", "interior-point")
 
 
-def _exact_candidates(bank: PlayBank, target: float, state: FloatArray) -> list[float]:
-    """All inputs v with Gamma(v; state) == target (the map is continuous piecewise linear)."""
-    p, q, w = bank.plays, bank.weights, state
-    bps = np.unique(np.concatenate([w, w + p]))
-    vals = bank.offset + np.minimum(bps[:, None], np.maximum(bps[:, None] - p, w)) @ q
-    d = vals - target
-    cands: list[float] = []
-    total = float(q.sum())  # slope left of all breakpoints and right of all of them
-    if total != 0.0:
-        v_left = bps[0] - d[0] / total
-        if v_left <= bps[0]:
-            cands.append(float(v_left))
-        v_right = bps[-1] - d[-1] / total
-        if v_right >= bps[-1]:
-            cands.append(float(v_right))
-    sign_change = np.flatnonzero(d[:-1] * d[1:] <= 0.0)
-    for j in sign_change:
-        d0, d1 = d[j], d[j + 1]
-        if d0 == d1:  # a flat piece exactly at the target
-            cands.extend([float(bps[j]), float(bps[j + 1])])
-        else:
-            cands.append(float(bps[j] + (bps[j + 1] - bps[j]) * d0 / (d0 - d1)))
-    if not cands:  # unreachable target (non-monotone weights): closest breakpoint output
-        cands.append(float(bps[int(np.argmin(np.abs(d)))]))
-    return cands
-
-
 def gamma_step_inverse(
-    bank: PlayBank, target: float, state: FloatArray, v_prev: float, *, method: str = "exact",
+    model: GammaModel, target: float, state: GammaState, *, method: str = "exact",
     bounds: tuple[float, float] | None = None, tol: float = 1e-6,
-) -> tuple[float, FloatArray]:
+) -> tuple[float, GammaState]:
     """One step of Gamma_k^{-1} (seed 001 Fig. 4.25-4.33): the input ``v_k`` whose output from
-    ``state`` (W_{k-1}) is ``target``, started at ``v_prev``; returns ``(v_k, W_k)``.
+    ``state`` (W_{k-1}) is ``target``, started at the previous input ``state.u``; returns
+    ``(v_k, W_k)``. The result is clamped into ``bounds`` (default: 50 input units either side
+    of the previous input).
 
-    ``method``: ``exact`` (ours: solve the piecewise-linear map at its breakpoints and take the
-    root nearest ``v_prev``), ``bounded`` (FMINBND: golden section + parabolic interpolation on
-    ``bounds``), ``nelder-mead`` (FMINSEARCH), ``slsqp`` and ``interior-point`` (FMINCON-like
-    constrained solvers; SciPy's ``trust-constr`` is its interior-point method).
+    ``method``: ``exact`` (ours: the model's breakpoint inverse, the root of the
+    piecewise-linear map nearest the previous input), ``bounded`` (FMINBND: golden section +
+    parabolic interpolation on ``bounds``), ``nelder-mead`` (FMINSEARCH), ``slsqp`` and
+    ``interior-point`` (FMINCON-like constrained solvers; SciPy's ``trust-constr`` is its
+    interior-point method).
     """
+    v_prev = float(state.u)
     lo, hi = bounds if bounds is not None else (v_prev - 50.0, v_prev + 50.0)
     if method == "exact":
-        cands = _exact_candidates(bank, target, state)
-        v = min(cands, key=lambda c: abs(c - v_prev))
+        v, new_state = model.invert_step(target, state, method="exact")
+        if lo <= v <= hi:
+            return v, new_state
         v = min(max(v, lo), hi)
     else:
-        def cost(x: Any) -> float:
-            xv = float(np.asarray(x).ravel()[0])
-            return (bank.output_at(xv, state) - target) ** 2
+        v = _solver_step(model, target, state, method=method, bounds=(lo, hi), tol=tol)
+    return v, model.step(v, state)[1]
 
-        if method == "bounded":
-            res = optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded",
-                                           options={"xatol": tol})
-            v = float(res.x)
-        elif method == "nelder-mead":
-            # The default simplex (5 % of x0) cannot leave a backlash plateau; start it one
-            # largest play wide, as a tuned FMINSEARCH would be.
-            width = float(np.max(bank.plays)) or 1.0
-            res = optimize.minimize(cost, x0=[v_prev], method="Nelder-Mead",
-                                    options={"xatol": tol, "fatol": tol**2,
-                                             "initial_simplex": [[v_prev], [v_prev + width]]})
-            v = float(res.x[0])
-        elif method == "slsqp":
-            res = optimize.minimize(cost, x0=[v_prev], method="SLSQP", bounds=[(lo, hi)],
-                                    options={"ftol": tol**2})
-            v = float(res.x[0])
-        elif method == "interior-point":
-            with warnings.catch_warnings():  # quasi-Newton noise on the piecewise-linear map
-                warnings.simplefilter("ignore", UserWarning)
-                res = optimize.minimize(cost, x0=[v_prev], method="trust-constr",
-                                        bounds=[(lo, hi)], options={"xtol": tol, "gtol": tol**2})
-            v = float(res.x[0])
-        else:
-            raise HysteresisError(
-                f"unknown inverse method {method!r}; known: {', '.join(GAMMA_METHODS)}"
-            )
-    _, new_state = bank.step(v, state)
-    return v, new_state
+
+def _solver_step(model: GammaModel, target: float, state: GammaState, *, method: str,
+                 bounds: tuple[float, float], tol: float) -> float:
+    """Table 4.4's LSQ_Opt solvers on ``(Gamma(v | W_{k-1}) - target)^2`` from ``state.u``."""
+    v_prev = float(state.u)
+    lo, hi = bounds
+
+    def cost(x: Any) -> float:
+        y, _ = model.step(float(np.asarray(x).ravel()[0]), state)
+        return (y - target) ** 2
+
+    if method == "bounded":
+        res = optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded",
+                                       options={"xatol": tol})
+        return float(res.x)
+    if method == "nelder-mead":
+        # The default simplex (5 % of x0) cannot leave a backlash plateau; start it one
+        # largest play wide, as a tuned FMINSEARCH would be.
+        width = float(np.max(model.thresholds_)) or 1.0
+        res = optimize.minimize(cost, x0=[v_prev], method="Nelder-Mead",
+                                options={"xatol": tol, "fatol": tol**2,
+                                         "initial_simplex": [[v_prev], [v_prev + width]]})
+        return float(res.x[0])
+    if method == "slsqp":
+        res = optimize.minimize(cost, x0=[v_prev], method="SLSQP", bounds=[(lo, hi)],
+                                options={"ftol": tol**2})
+        return float(res.x[0])
+    if method == "interior-point":
+        with warnings.catch_warnings():  # quasi-Newton noise on the piecewise-linear map
+            warnings.simplefilter("ignore", UserWarning)
+            res = optimize.minimize(cost, x0=[v_prev], method="trust-constr",
+                                    bounds=[(lo, hi)], options={"xtol": tol, "gtol": tol**2})
+        return float(res.x[0])
+    raise HysteresisError(
+        f"unknown inverse method {method!r}; known: {', '.join(GAMMA_METHODS)}"
+    )
 
 
 def gamma_inverse(
-    bank: PlayBank, desired: Any, *, method: str = "exact", stroke: StrokeLimits | None = None,
-    v0: float = 0.0, max_steps: int | None = None,
+    model: GammaModel, desired: Any, *, method: str = "exact",
+    stroke: StrokeLimits | None = None, v0: float = 0.0, max_steps: int | None = None,
 ) -> tuple[FloatArray, FloatArray]:
-    """Recursive inverse of a whole desired trajectory; returns ``(inputs, seconds_per_step)``.
+    """Recursive inverse of a whole desired trajectory from ``model.initial_state(v0)``;
+    returns ``(inputs, seconds_per_step)``.
 
     The search of step k starts at ``v_{k-1}`` (Fig. 4.32); ``max_steps`` stops early (timing
     the slow solvers on a prefix)."""
+    if not isinstance(model, GammaModel):
+        raise HysteresisError(
+            f"{type(model).__name__} is not a Gamma model; Table 4.4's solvers invert Gamma_n")
+    model.check_fitted()
     yd = as_1d(desired, "desired")
     if max_steps is not None:
         yd = yd[:max_steps]
-    check_inverse_reach(bank, desired=yd)
+    check_inverse_reach(model, desired=yd)
     lim = stroke or StrokeLimits()
-    pmax = float(np.max(bank.plays))
-    slope = max(abs(float(bank.weights.sum())), 1e-6)
-    state = bank.initial_state(v0)
-    v_prev = v0
-    y_prev = bank.output_at(v0, state)
+    pmax = float(np.max(model.thresholds_))
+    slope = max(abs(float(model.weights_.sum())), 1e-6)
+    state = model.initial_state(v0)
+    y_prev, _ = model.step(v0, state)
     out = np.empty_like(yd)
     times = np.empty_like(yd)
     for k, target in enumerate(yd):
         # Search interval for the bracketing solvers: the input may have to cross the largest
         # play (a reversal) plus the step in output over the outer slope, with a margin.
         half = 1.5 * pmax + 3.0 * abs(float(target) - y_prev) / slope + 1e-3
-        lo = max(lim.low, v_prev - half)
-        hi = min(lim.high, v_prev + half)
+        lo = max(lim.low, state.u - half)
+        hi = min(lim.high, state.u + half)
         t0 = time.perf_counter()
-        v, state = gamma_step_inverse(bank, float(target), state, v_prev, method=method,
-                                      bounds=(lo, hi))
+        out[k], state = gamma_step_inverse(model, float(target), state, method=method,
+                                           bounds=(lo, hi))
         times[k] = time.perf_counter() - t0
-        out[k] = v
-        v_prev = v
         y_prev = float(target)
     return out, times
 
@@ -643,27 +557,9 @@ class InverseStepper(Protocol):
         ...
 
 
-class PlayBankStepper:
-    """:class:`PlayBank` with the exact per-step inverse (ours)."""
-
-    def __init__(self, bank: PlayBank) -> None:
-        self.bank = bank
-        self.reset(0.0)
-
-    def reset(self, u0: float) -> None:
-        self.state = self.bank.initial_state(u0)
-        self.v_prev = float(u0)
-
-    def inverse(self, target: float, *, low: float, high: float) -> tuple[float, float]:
-        v, self.state = gamma_step_inverse(self.bank, target, self.state, self.v_prev,
-                                           method="exact", bounds=(low, high))
-        self.v_prev = v
-        return v, float(self.bank.offset + self.bank.weights @ self.state)
-
-
 class FamilyStepper:
     """Any fitted family exposing ``initial_state(u0)``, ``step(u, state) -> (y, state)`` and
-    ``invert_step(y, state) -> (u, state)`` (the Bouc-Wen family does)."""
+    ``invert_step(y, state) -> (u, state)`` (e.g. the Gamma and Bouc-Wen families)."""
 
     def __init__(self, model: Any) -> None:
         for name in ("initial_state", "invert_step"):
@@ -698,22 +594,8 @@ class FamilyStepper:
         return u, y
 
 
-def play_bank_from(model: Any) -> PlayBank:
-    """The :class:`PlayBank` of a fitted Gamma family (``thresholds_``, ``weights_``,
-    ``offset_``), so the Table 4.4 solvers and our exact inverse run on the family's fit."""
-    try:
-        return PlayBank(np.asarray(model.thresholds_, dtype=np.float64),
-                        np.asarray(model.weights_, dtype=np.float64), float(model.offset_))
-    except AttributeError as exc:
-        raise HysteresisError(
-            f"{type(model).__name__} is not a fitted Gamma model ({exc})"
-        ) from None
-
-
 def as_stepper(model: Any) -> InverseStepper:
-    """Wrap a :class:`PlayBank`, a stepper, or a step-able fitted family."""
-    if isinstance(model, PlayBank):
-        return PlayBankStepper(model)
+    """Wrap a stepper, or a step-able fitted family (a Gamma fit among them)."""
     if callable(getattr(model, "inverse", None)) and callable(getattr(model, "reset", None)):
         return model  # type: ignore[no-any-return]
     return FamilyStepper(model)
@@ -727,7 +609,8 @@ def run_inverse_with_error_correction(
     identified_range: tuple[float, float] | None = None,
 ) -> LoopResult:
     """Our compensator: ``u_k = M^{-1}(desired_k - f_hat)`` with a model's exact step inverse
-    (``model``: a :class:`PlayBank` - the Gamma operator - or any stepper/step-able family).
+    (``model``: a fitted :class:`~hysteresis.gamma.GammaModel` - the Gamma operator - or any
+    stepper/step-able family).
 
     ``f_hat`` is a random-walk Kalman estimate of the model's output error
     ``f = measured - M(u)``; each delivered measurement is compared with the model's own
@@ -742,7 +625,7 @@ def run_inverse_with_error_correction(
     _check_dt(dt_s)
     yd = as_1d(desired, "desired")
     # Before the first command: a model that cannot reach the targets is refused, not driven.
-    check_inverse_reach(getattr(model, "bank", getattr(model, "model", model)),
+    check_inverse_reach(getattr(model, "model", model),
                         identified_range=identified_range, desired=yd)
     lim = stroke or StrokeLimits()
     cam = _Camera(camera or CameraModel(rate_hz=None), dt_s)

@@ -143,6 +143,31 @@ class GammaModel(StatefulModel):
         self.search_radius = search_radius
         self.xatol = xatol
 
+    @classmethod
+    def from_params(cls, thresholds: Any, weights: Any, offset: float = 0.0, *,
+                    start_position: float = 0.0) -> GammaModel:
+        """A model with known parameters (the thesis' Table 4.1, a plant's), fitted to nothing.
+
+        Every play starts at ``w = u0 - start_position p`` (``start_state="fit"``): with the
+        default 0 an initial state is every play at the first input.
+        """
+        p = _check_thresholds(np.array(thresholds, dtype=np.float64))
+        q = np.array(weights, dtype=np.float64)
+        if q.shape != p.shape or not np.all(np.isfinite(q)):
+            raise HysteresisError(
+                f"weights must be {p.size} finite values (one per threshold), got {q.tolist()}")
+        if not (np.isfinite(offset) and np.isfinite(start_position)):
+            raise HysteresisError(
+                f"offset and start_position must be finite, got {offset}, {start_position}")
+        model = cls(thresholds=p.tolist())
+        model.thresholds_, model.weights_ = p, q
+        model.offset_, model.start_position_ = float(offset), float(start_position)
+        # NaN multiplier: no sum-to-one constraint was solved (as a fit without one reports)
+        model.lagrange_multiplier_, model.sse_, model.n_samples_ = float("nan"), 0.0, 0
+        # no identification record: the widest play stands for its span (bounded search tolerance)
+        model.input_span_ = float(p.max()) or 1.0
+        return model
+
     # -- hyper-parameters -------------------------------------------------------------
     def _threshold_candidates(self, uu: FloatArray) -> list[FloatArray]:
         """The threshold vectors to try: the given ones, or one per derived span."""

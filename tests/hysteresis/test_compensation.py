@@ -19,13 +19,11 @@ from hysteresis.compensation import (
     GAMMA_METHODS,
     CameraModel,
     FamilyStepper,
-    PlayBank,
     StrokeLimits,
     _Camera,
     as_stepper,
     camera_frames,
     estimate_model_error,
-    fit_play_bank,
     gamma_inverse,
     gamma_step_inverse,
     mixed_sine_profile,
@@ -40,6 +38,7 @@ from hysteresis.compensation import (
     sine_profile,
     triangle_profile,
 )
+from hysteresis.gamma import GammaModel, GammaState
 
 DT = 0.01
 
@@ -82,11 +81,11 @@ REFERENCE = ch(0.7, -0.5, 16.0, 45.0)  # a deliberately wrong reference model
 
 
 @pytest.fixture(scope="module")
-def bank() -> PlayBank:
+def gamma() -> GammaModel:
     t = np.arange(0.0, 80.0, DT)
     u = sine_profile(t)
     y = run_open_loop(BacklashPlant(), u, desired=u).output
-    return fit_play_bank(u, y)
+    return GammaModel(threshold_fraction=1 / 3, constraint="free", fit_offset=True).fit(u, y)
 
 
 # --- profiles --------------------------------------------------------------------------------
@@ -109,58 +108,64 @@ def test_profiles_match_the_papers() -> None:
 
 # --- Gamma operator and inverse -----------------------------------------------------------------
 def test_play_operator_memory_example_of_fig_4_22() -> None:
-    b = PlayBank(np.array([2.0]), np.array([1.0]))
+    b = GammaModel.from_params([2.0], [1.0])
     # Same final input, different history -> different output (the memory property).
     assert b.predict([0.0, 2.0, 1.0]).tolist() == [0.0, 0.0, 0.0]
     assert b.predict([0.0, 3.0, 1.0]).tolist() == [0.0, 1.0, 1.0]
 
 
-def test_fit_play_bank_recovers_known_weights() -> None:
-    truth = PlayBank(np.array([0.0, 0.5, 1.0, 1.5]), np.array([0.2, 0.3, 0.4, 0.1]), offset=0.3)
+def test_free_fit_recovers_known_weights_and_offset() -> None:
+    truth = GammaModel.from_params([0.0, 0.5, 1.0, 1.5], [0.2, 0.3, 0.4, 0.1], offset=0.3)
     u = sine_profile(np.arange(0, 80, DT))
-    fit = fit_play_bank(u, truth.predict(u), plays=truth.plays, ridge=0.0)
-    assert fit.weights == pytest.approx(truth.weights, abs=1e-8)
-    assert fit.offset == pytest.approx(0.3, abs=1e-8)
+    fit = GammaModel(thresholds=[0.0, 0.5, 1.0, 1.5], constraint="free", fit_offset=True,
+                     start_state="fit").fit(u, truth.predict(u))
+    assert fit.start_position_ == truth.start_position_  # every play starts at the first input
+    assert fit.weights_ == pytest.approx(truth.weights_, abs=1e-8)
+    assert fit.offset_ == pytest.approx(0.3, abs=1e-8)
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_exact_inverse_is_exact_on_random_banks(seed: int) -> None:
+def test_exact_inverse_is_exact_on_random_models(seed: int) -> None:
     rng = np.random.default_rng(seed)
     plays = np.sort(rng.uniform(0, 2, 8))
     plays[0] = 0.0
     weights = rng.normal(0.2, 0.3, 8)
     weights[0] = abs(weights[0]) + 0.3  # keep the map invertible everywhere
     weights[1:] = np.abs(weights[1:])
-    b = PlayBank(plays, weights, offset=float(rng.normal()))
-    yd = b.offset + mixed_sine_profile(np.arange(0, 30, DT))
+    b = GammaModel.from_params(plays, weights, offset=float(rng.normal()))
+    yd = b.offset_ + mixed_sine_profile(np.arange(0, 30, DT))
     u, _ = gamma_inverse(b, yd)
-    assert np.max(np.abs(b.predict(u) - yd)) < 1e-9
+    assert np.max(np.abs(b.predict(u, state=b.initial_state(0.0)) - yd)) < 1e-9
 
 
 def test_exact_inverse_picks_the_root_nearest_the_last_input() -> None:
     # Signed weights make the map non-monotone: f(v) = -v/2 (v<0), v/2 (0..1), 1 - v/2 (v>1),
     # so the target 0.25 has three roots, -0.5, 0.5 and 1.5.
-    b = PlayBank(np.array([0.0, 1.0]), np.array([0.5, -1.0]))
+    b = GammaModel.from_params([0.0, 1.0], [0.5, -1.0])
     for v_prev, root in ((-0.3, -0.5), (0.6, 0.5), (1.4, 1.5)):
-        v, _ = gamma_step_inverse(b, 0.25, b.initial_state(), v_prev)
+        v, _ = gamma_step_inverse(b, 0.25, GammaState(np.zeros(2), v_prev))
         assert v == pytest.approx(root)
 
 
 @pytest.mark.parametrize("method", GAMMA_METHODS)
-def test_every_table_4_4_method_inverts_a_monotone_bank(method: str) -> None:
-    b = PlayBank(np.array([0.0, 0.4, 0.8, 1.2]), np.array([0.4, 0.3, 0.2, 0.1]))
+def test_every_table_4_4_method_inverts_a_monotone_model(method: str) -> None:
+    b = GammaModel.from_params([0.0, 0.4, 0.8, 1.2], [0.4, 0.3, 0.2, 0.1])
     yd = 0.5 * mixed_sine_profile(np.arange(0, 30, DT))
     u, times = gamma_inverse(b, yd, method=method, max_steps=60)
     assert times.shape == (60,) and np.all(times > 0)
-    assert np.max(np.abs(b.predict(u) - yd[:60])) < 2e-3
+    assert np.max(np.abs(b.predict(u, state=b.initial_state(0.0)) - yd[:60])) < 2e-3
 
 
-def test_unknown_method_and_bad_bank_are_named() -> None:
-    b = PlayBank(np.array([0.0]), np.array([1.0]))
+def test_unknown_method_and_bad_parameters_are_named() -> None:
+    b = GammaModel.from_params([0.0], [1.0])
     with pytest.raises(HysteresisError, match="unknown inverse method 'newton'"):
-        gamma_step_inverse(b, 0.1, b.initial_state(), 0.0, method="newton")
-    with pytest.raises(HysteresisError, match="plays must be finite and >= 0"):
-        PlayBank(np.array([-1.0]), np.array([1.0]))
+        gamma_step_inverse(b, 0.1, b.initial_state(0.0), method="newton")
+    with pytest.raises(HysteresisError, match="thresholds must be finite and >= 0"):
+        GammaModel.from_params([-1.0], [1.0])
+    with pytest.raises(HysteresisError, match="weights must be 2 finite values"):
+        GammaModel.from_params([0.0, 1.0], [1.0])
+    with pytest.raises(HysteresisError, match="not a Gamma model"):
+        gamma_inverse(TRUTH, np.zeros(3))  # type: ignore[arg-type]
     with pytest.raises(HysteresisError, match="returned no 'tip_angle_deg'"):
         run_open_loop(BacklashPlant(), [0.0], desired=[0.0], output_key="tip_angle_deg")
 
@@ -174,15 +179,15 @@ PROFILES = {
 
 
 @pytest.mark.parametrize("profile", sorted(PROFILES))
-def test_feedforward_and_ours_reduce_the_error(bank: PlayBank, profile: str) -> None:
+def test_feedforward_and_ours_reduce_the_error(gamma: GammaModel, profile: str) -> None:
     fn, dur = PROFILES[profile]
     yd = fn(np.arange(0.0, dur, DT))
     stroke = StrokeLimits(-15.0, 15.0)
     none = run_open_loop(BacklashPlant(noise=0.005), yd, desired=yd, stroke=stroke).statistics()
-    u_ff, _ = gamma_inverse(bank, yd, stroke=stroke)
+    u_ff, _ = gamma_inverse(gamma, yd, stroke=stroke)
     ff = run_open_loop(BacklashPlant(noise=0.005), u_ff, desired=yd, stroke=stroke).statistics()
     ours_run = run_inverse_with_error_correction(
-        BacklashPlant(noise=0.005), yd, bank, stroke=stroke, meas_var=1e-2)
+        BacklashPlant(noise=0.005), yd, gamma, stroke=stroke, meas_var=1e-2)
     ours = ours_run.statistics()
     # Seed 001 reports S_{n-1} down 80-90 % with the inverse alone; ours targets >= 90 % RMSE.
     assert reduction(none["std_error"], ff["std_error"]) > 75.0
@@ -190,14 +195,14 @@ def test_feedforward_and_ours_reduce_the_error(bank: PlayBank, profile: str) -> 
     assert stroke.contains(ours_run.command)
 
 
-def test_compensated_input_stays_within_the_stroke(bank: PlayBank) -> None:
+def test_compensated_input_stays_within_the_stroke(gamma: GammaModel) -> None:
     yd = mixed_sine_profile(np.arange(0.0, 30.0, DT))  # needs more than +-8 mm of input
     stroke = StrokeLimits(-8.0, 8.0)
-    u_ff, _ = gamma_inverse(bank, yd, stroke=stroke)
+    u_ff, _ = gamma_inverse(gamma, yd, stroke=stroke)
     assert stroke.contains(u_ff) and u_ff.max() == pytest.approx(8.0)
     for res in (
         run_open_loop(BacklashPlant(), u_ff * 2.0, desired=yd, stroke=stroke),
-        run_inverse_with_error_correction(BacklashPlant(), yd, bank, stroke=stroke),
+        run_inverse_with_error_correction(BacklashPlant(), yd, gamma, stroke=stroke),
         run_vision_feedback(BacklashPlant(), yd, stroke=stroke),
         run_ame_pd(BacklashPlant(), yd, None, kp=2.0, kd=0.0, stroke=stroke),
     ):
@@ -334,3 +339,17 @@ def test_ukf_on_sparse_camera_frames_still_beats_the_model() -> None:
     assert reduction(m["abs_err"], e["abs_err"]) > 90.0
     with pytest.raises(HysteresisError, match="no finite measurement"):
         estimate_model_error(REFERENCE, pull[:5], np.full(5, np.nan), dt_s=DT)
+
+
+def test_a_gamma_model_steps_online_like_its_exact_step_inverse() -> None:
+    b = GammaModel.from_params([0.0, 0.4, 0.8], [0.5, 0.3, 0.2], offset=0.1)
+    st = as_stepper(b)
+    assert isinstance(st, FamilyStepper)
+    state = b.initial_state(0.0)
+    applied = []
+    for target in (0.5, 1.2, 0.7, -0.4):
+        v, state = gamma_step_inverse(b, target, state, bounds=(-0.5, 1.0))
+        y = b.offset_ + float(b.weights_ @ state.w)
+        assert st.inverse(target, low=-0.5, high=1.0) == pytest.approx((v, y))
+        applied.append(v)
+    assert applied[1] == 1.0  # 1.2 is beyond the output at the bound: clamped

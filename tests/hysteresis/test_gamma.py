@@ -127,6 +127,25 @@ def test_fit_offset_recovers_offset() -> None:
     np.testing.assert_allclose(model.weights_, q, atol=1e-8)
 
 
+def test_from_params_reproduces_a_fit() -> None:
+    """Known parameters (here a fit's, its start mid-stroke) make the same model, fitted to
+    nothing."""
+    y = simulate(np.array(TABLE[3]["weights"]))[50:] + 0.2
+    m = GammaModel().fit(U[50:], y)
+    assert m.start_position_ == 1.0  # the record starts on the way up
+    b = GammaModel.from_params(m.thresholds_, m.weights_, m.offset_,
+                               start_position=m.start_position_)
+    u = triangle_decay()
+    np.testing.assert_array_equal(b.predict(u), m.predict(u))
+    yd = 3 * np.sin(np.linspace(0, 12, 400))
+    np.testing.assert_array_equal(b.invert(yd), m.invert(yd))
+    assert (b.sse_, b.n_samples_) == (0.0, 0) and b.weights_ is not m.weights_
+    with pytest.raises(HysteresisError, match="thresholds must be distinct"):
+        GammaModel.from_params([0.0, 0.0], [0.5, 0.5])
+    with pytest.raises(HysteresisError, match="weights must be 1 finite values"):
+        GammaModel.from_params([0.0], [np.nan])
+
+
 def fitted(q: np.ndarray, **kw: object) -> GammaModel:
     return GammaModel(**{**THESIS, "constraint": "free", **kw}).fit(U, simulate(q))  # type: ignore[arg-type]
 

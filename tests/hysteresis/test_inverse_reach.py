@@ -7,21 +7,17 @@ import numpy as np
 import pytest
 
 from hysteresis.base import HysteresisError, check_inverse_reach
-from hysteresis.compensation import PlayBank, gamma_inverse, run_inverse_with_error_correction
+from hysteresis.compensation import gamma_inverse, run_inverse_with_error_correction
 from hysteresis.gamma import GammaModel
 
 
 def _gamma(weights: list[float], plays: list[float]) -> GammaModel:
-    m = GammaModel(thresholds=plays, constraint="free")
-    m.thresholds_ = np.asarray(plays, dtype=np.float64)
-    m.weights_ = np.asarray(weights, dtype=np.float64)
-    m.offset_ = 0.0
-    return m
+    return GammaModel.from_params(plays, weights)
 
 
 def test_healthy_models_pass_and_non_play_models_are_not_judged() -> None:
     check_inverse_reach(_gamma([0.6, 0.4], [0.0, 0.5]), identified_range=(-2.0, 2.0))
-    check_inverse_reach(PlayBank(np.array([0.0, 1.0]), np.array([0.7, 0.3])),
+    check_inverse_reach(_gamma([0.7, 0.3], [0.0, 1.0]),
                         identified_range=(0.0, 2.0), desired=np.array([0.0, 1.5]))
     check_inverse_reach(object())  # no weights: nothing to judge
 
@@ -32,7 +28,7 @@ def test_non_positive_total_weight_is_refused_by_the_gamma_inverse() -> None:
                                               r"demanded outputs -1..2"):
         model.invert(np.array([-1.0, 0.0, 2.0]))
     with pytest.raises(HysteresisError, match="<= 0"):
-        gamma_inverse(PlayBank(np.array([0.0, 1.0]), np.array([1.0, -1.0])), np.zeros(3))
+        gamma_inverse(_gamma([1.0, -1.0], [0.0, 1.0]), np.zeros(3))
 
 
 def test_thresholds_reaching_the_identification_span_are_refused() -> None:
@@ -60,7 +56,7 @@ def test_the_compensator_refuses_before_the_first_command() -> None:
                                           identified_range=(0.0, 2.0))
     with pytest.raises(HysteresisError, match="<= 0"):
         run_inverse_with_error_correction(plant, np.linspace(0, 1, 50),
-                                          PlayBank(np.array([0.0, 1.0]), np.array([1.0, -2.0])))
+                                          _gamma([1.0, -2.0], [0.0, 1.0]))
     assert commands == []
     good = _gamma([0.6, 0.4], [0.0, 0.5])
     res = run_inverse_with_error_correction(plant, np.linspace(0, 1, 50), good,
