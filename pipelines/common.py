@@ -161,18 +161,20 @@ def hydra_sweep_dir() -> Path | None:
 def identification_plan(cfg: Mapping[str, Any], dataset: pd.DataFrame,
                         paths: Any) -> Any:
     """The stage edge of :func:`pipelines.stages.identification_plan`: manifest roles from
-    ingest's ``runs.json``, the settings from ``cfg``; every decision is logged."""
+    ingest's ``runs.json``, the settings from ``cfg`` (a fit or validate config,
+    :class:`pipelines.schemas.IdentificationConfig`); every decision is logged."""
     import logging
 
     from pipelines import stages
     from rig_io.dataset import read_runs
 
     plan = stages.identification_plan(
-        dataset, fit_excitations=list(cfg.get("fit_excitations") or ["sine_decay"]),
-        heldout=list(cfg.get("heldout", ["triangle_decay", "trapezoid_decay"]) or []),
-        fit_runs=list(cfg.get("fit_runs") or []),
+        dataset, fit_excitations=list(cfg["fit_excitations"]),
+        # fit's config has no held-out kinds: they never change which data identifies
+        heldout=list(cfg.get("heldout") or []),
+        fit_runs=list(cfg["fit_runs"]),
         roles=stages.manifest_roles(read_runs(Path(paths.processed))),
-        single_run_heldout_fraction=float(cfg.get("single_run_heldout_fraction", 0.3)))
+        single_run_heldout_fraction=float(cfg["single_run_heldout_fraction"]))
     log = logging.getLogger("pipelines")
     for label, note in plan.notes.items():
         log.info("identification: %s: %s", label, note)

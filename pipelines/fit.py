@@ -22,7 +22,7 @@ from typing import Any
 import hydra
 import pandas as pd
 
-from pipelines import cache, stages
+from pipelines import cache, schemas, stages
 from pipelines.common import (
     CONF_DIR,
     Paths,
@@ -88,7 +88,8 @@ def family_specs(cfg: Mapping[str, Any], *, conf_dir: Path = CONF_DIR) -> list[F
     (``all`` = :func:`hysteresis.family_names`), each from ``conf/family/<name>.yaml`` with
     ``family_overrides.<name>`` merged on top.
     """
-    selected = cfg.get("family")
+    cfg = schemas.with_defaults(schemas.FitConfig, cfg)
+    selected = cfg["family"]
     if selected:
         fam = dict(selected)
         if "_target_" not in fam:
@@ -96,14 +97,14 @@ def family_specs(cfg: Mapping[str, Any], *, conf_dir: Path = CONF_DIR) -> list[F
         cls = _target_class(str(fam["_target_"]))
         name = str(getattr(cls, "family", cls.__name__))
         return [FamilySpec(name, fam, instantiate_family, cache.source_hash(cls))]
-    wanted = cfg.get("families", "all")
+    wanted = cfg["families"]
     if wanted in (None, "all"):
         from hysteresis.base import family_names
 
         names = family_names()
     else:
         names = [str(n) for n in ([wanted] if isinstance(wanted, str) else wanted)]
-    overrides = cfg.get("family_overrides") or {}
+    overrides = cfg["family_overrides"]
     specs = []
     for name in names:
         fam = family_file_config(name, conf_dir=conf_dir)
@@ -223,23 +224,23 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
 
     Reads the processed dataset (unless given), fits what is not cached, writes model files.
     """
+    cfg = schemas.with_defaults(schemas.FitConfig, cfg)
     paths = Paths.from_config(cfg["paths"])
     clean_leftovers(paths.models)  # temporaries of a killed fit
     if dataset is None:
         dataset = read_processed(paths.processed)
-    sig = cfg.get("signals") or {}
-    input_col, output_col = str(sig.get("input", "input")), str(sig.get("output", "output"))
-    sel = cfg.get("config") or {}
-    configs = stages.configurations(dataset, rig=sel.get("rig"),
-                                    curve_angle_deg=sel.get("curve_angle_deg"),
-                                    radius_mm=sel.get("radius_mm"))
+    input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
+    sel = cfg["config"]
+    configs = stages.configurations(dataset, rig=sel["rig"],
+                                    curve_angle_deg=sel["curve_angle_deg"],
+                                    radius_mm=sel["radius_mm"])
     plan = identification_plan(cfg, dataset, paths)
     tasks = stages.plan_fits(plan.dataset, family_specs(cfg), configs,
                              fit_excitations=plan.fit_excitations, fit_runs=plan.chosen,
                              marked=plan.marked, input_col=input_col, output_col=output_col)
-    previous = load_models(paths.models) if cfg.get("cache", True) else None
-    progress = bool(cfg.get("progress", False))
-    n_jobs = int(cfg.get("n_jobs", 1))
+    previous = load_models(paths.models) if cfg["cache"] else None
+    progress = bool(cfg["progress"])
+    n_jobs = int(cfg["n_jobs"])
     if hydra_sweep_dir() is not None:
         n_jobs = 1  # the multirun launcher already runs jobs in parallel
     start = time.perf_counter()
@@ -258,15 +259,14 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
 def fit_metrics(fits: pd.DataFrame, dataset: pd.DataFrame, cfg: Mapping[str, Any]
                 ) -> pd.DataFrame:
     """In-sample metrics (split ``fit``) of the given fits, for the stage's own MLflow runs."""
-    sig = cfg.get("signals") or {}
+    sig = cfg["signals"]
     frames = []
     for _, group in fits.groupby(["rig", "curve_angle_deg", "radius_mm"], dropna=False):
         first = group.iloc[0]
         config = stages.Configuration(str(first["rig"]), stages._num(first["curve_angle_deg"]),
                                       stages._num(first["radius_mm"]))
         signals = stages.run_signals(stages.config_rows(dataset, config),
-                                     input_col=str(sig.get("input", "input")),
-                                     output_col=str(sig.get("output", "output")))
+                                     input_col=str(sig["input"]), output_col=str(sig["output"]))
         metrics, _, _ = stages.evaluate_configuration(group, signals, heldout=[], cross=False)
         frames.append(metrics)
     return pd.concat(frames, ignore_index=True) if frames else stages.metrics_frame([])
@@ -280,7 +280,7 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
     paths = Paths.from_config(plain["paths"])
     dataset = read_processed(paths.processed)
     fits = run(plain, dataset=dataset)
-    settings = tracking.settings_from_config(plain.get("tracking", {}), root=paths.root)
+    settings = tracking.settings_from_config(plain["tracking"], root=paths.root)
     tracker = tracking.Tracker(settings)
     if tracker.enabled:
         with tracking.StageRun(tracker, "fit", sweep_dir=hydra_sweep_dir()) as stage_run:

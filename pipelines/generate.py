@@ -219,6 +219,10 @@ def _main() -> None:
     import hydra
     from omegaconf import DictConfig, OmegaConf
 
+    from pipelines import schemas
+
+    schemas.register()
+
     @hydra.main(config_path="../conf", config_name="generate", version_base="1.3")
     def main(cfg: DictConfig) -> None:
         conf = OmegaConf.to_container(cfg, resolve=True)

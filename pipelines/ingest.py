@@ -209,35 +209,34 @@ def _prune(dst: Path, runs: dict[str, dict[str, Any]]) -> list[str]:
     return removed
 
 
-def _plain_limits(section: Any) -> dict[str, Any]:
+def _plain_section(section: Any) -> dict[str, Any]:
     from omegaconf import OmegaConf
 
-    loaded = OmegaConf.to_container(section, resolve=True) if section is not None else {}
-    return {str(k): v for k, v in loaded.items()} if isinstance(loaded, dict) else {}
+    loaded = OmegaConf.to_container(section, resolve=True)
+    assert isinstance(loaded, dict)
+    return {str(k): v for k, v in loaded.items()}
 
 
 def _main() -> None:
     import hydra
-    from omegaconf import DictConfig, OmegaConf
+    from omegaconf import DictConfig
+
+    from pipelines import schemas
+
+    schemas.register()
 
     @hydra.main(config_path="../conf", config_name="ingest", version_base="1.3")
     def main(cfg: DictConfig) -> None:
         from hydra.utils import to_absolute_path
 
-        mapping: dict[str, Any] | None = None
-        if cfg.get("importer") is not None:
-            loaded = OmegaConf.to_container(cfg.importer, resolve=True)
-            assert isinstance(loaded, dict)
-            mapping = {str(k): v for k, v in loaded.items()}
-        sync_cfg = OmegaConf.to_container(cfg.sync, resolve=True)
-        assert isinstance(sync_cfg, dict)
-        sync = SyncOptions(**{str(k): v for k, v in sync_cfg.items()})
+        mapping = _plain_section(cfg.importer) if cfg.importer is not None else None
+        sync = SyncOptions(**_plain_section(cfg.sync))
         try:
             report = run_ingest(to_absolute_path(str(cfg.source)),
                                 to_absolute_path(str(cfg.out)), mapping=mapping, sync=sync,
                                 force=bool(cfg.force), prune=bool(cfg.prune),
                                 progress=bool(cfg.progress), limits=ReadLimits.from_mapping(
-                                    _plain_limits(cfg.get("limits"))))
+                                    _plain_section(cfg.limits)))
         except RigIOError as err:
             print(f"ingest: {err}", file=sys.stderr)
             raise SystemExit(2) from None

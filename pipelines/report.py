@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from hysteresis.play import play_matrix
-from pipelines import cache, stages
+from pipelines import cache, schemas, stages
 from pipelines.common import (
     Paths,
     dataset_hash,
@@ -230,6 +230,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
     from pipelines.validate import prediction_path, read_prediction_meta
 
     start = time.perf_counter()
+    cfg = schemas.with_defaults(schemas.ReportConfig, cfg)
     paths = Paths.from_config(cfg["paths"])
     clean_leftovers(paths.reports)  # temporaries of a killed report
     reports = paths.reports
@@ -239,10 +240,10 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
         metrics = pd.read_parquet(paths.metrics_parquet)
     if metrics.empty:
         raise PipelineError("the metrics table is empty: nothing to report")
-    fit_exc = str(cfg.get("fit_excitation", "sine_decay"))
-    metric = str(cfg.get("metric", "rmse"))
-    plot_cfg = dict(cfg.get("plots") or {})
-    dpi, max_points = int(plot_cfg.get("dpi", 72)), int(plot_cfg.get("max_points", 1500))
+    fit_exc = str(cfg["fit_excitation"])
+    metric = str(cfg["metric"])
+    plot_cfg = cfg["plots"]
+    dpi, max_points = int(plot_cfg["dpi"]), int(plot_cfg["max_points"])
     configs = sorted({_config_of(r) for r in metrics.to_dict("records")},
                      key=lambda c: (c.rig, c.curve_angle_deg or -1, c.radius_mm or -1))
     if fits is None:
@@ -265,7 +266,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
         "code": cache.hash_files([Path(__file__), Path(plots.__file__)]),
     })
     key_file = reports / KEY_FILE
-    if cfg.get("cache", True) and key_file.exists() and (reports / "report.md").exists():
+    if cfg["cache"] and key_file.exists() and (reports / "report.md").exists():
         try:
             record = json.loads(key_file.read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError):
@@ -298,13 +299,13 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
     # -- figures -----------------------------------------------------------------------
     config_plots: dict[str, list[Path]] = {}
     jobs = []
-    if plot_cfg.get("per_configuration", True):
+    if plot_cfg["per_configuration"]:
         for c in configs:
             out = contained(plots_dir, f"config_{c.label}.png")
             title = (f"{c.rig}  phi={c.curve_angle_deg:g} deg  r={c.radius_mm:g} mm"
                      if c.curve_angle_deg is not None and c.radius_mm is not None else c.label)
             jobs.append((c.label, prediction_path(paths.predictions, c), out, title))
-    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg.get("n_jobs", 1))
+    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg["n_jobs"])
     if n_jobs > 1 and len(jobs) > 1:
         from joblib import Parallel, delayed
 
@@ -317,7 +318,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
             config_plots.setdefault(label, []).append(path)
             files.append(path)
 
-    exemplary = pick_exemplary(configs, cfg.get("exemplary") or {})
+    exemplary = pick_exemplary(configs, cfg["exemplary"])
     elementary = _elementary_plot(fits, exemplary, paths, fit_exc, plots_dir, dpi, max_points)
     if elementary is not None:
         files.append(elementary)
@@ -344,7 +345,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
                     exemplary=exemplary,
                     config_plots=config_plots, shape_figs=shape_figs, elementary=elementary,
                     paths=paths)
-    formats = list(cfg.get("formats", ["md", "html"]))
+    formats = list(cfg["formats"])
     if "md" in formats:
         files.append(write_text_atomic(reports / "report.md", doc.markdown()))
     if "html" in formats:
@@ -480,7 +481,7 @@ def main_cfg(cfg: Any) -> ReportResult:
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
     result = run(plain)
-    tracker = tracking.Tracker(tracking.settings_from_config(plain.get("tracking", {}),
+    tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
                                                              root=paths.root))
     if tracker.enabled:
         with tracking.StageRun(tracker, "report", sweep_dir=hydra_sweep_dir()) as stage_run:

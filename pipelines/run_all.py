@@ -163,10 +163,9 @@ def run_generate_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
 
     gcfg = compose_stage("generate", stage_overrides("generate", pipeline))
     report: dict[str, Any] = run_generate(
-        specs_from_config(gcfg), str(gcfg["out"]), fmt=str(gcfg.get("format", "folder")),
-        compress=bool(gcfg.get("compress", False)), n_jobs=int(gcfg.get("n_jobs", 2)),
-        overwrite=bool(gcfg.get("overwrite", False)),
-        progress=bool(gcfg.get("progress", True)))
+        specs_from_config(gcfg), str(gcfg["out"]), fmt=str(gcfg["format"]),
+        compress=bool(gcfg["compress"]), n_jobs=int(gcfg["n_jobs"]),
+        overwrite=bool(gcfg["overwrite"]), progress=bool(gcfg["progress"]))
     log.info("generate: %d runs written, %d unchanged -> %s", len(report["written"]),
              len(report["skipped"]), report["out"])
     return report
@@ -184,10 +183,9 @@ def run_ingest_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
 
     icfg = compose_stage("ingest", stage_overrides("ingest", pipeline))
     report: dict[str, Any] = run_ingest(
-        str(icfg["source"]), str(icfg["out"]), mapping=icfg.get("importer"),
-        sync=SyncOptions(**dict(icfg.get("sync") or {})), force=bool(icfg.get("force", False)),
-        prune=bool(icfg.get("prune", True)), progress=bool(icfg.get("progress", True)),
-        limits=ReadLimits.from_mapping(dict(icfg.get("limits") or {})))
+        str(icfg["source"]), str(icfg["out"]), mapping=icfg["importer"],
+        sync=SyncOptions(**icfg["sync"]), force=bool(icfg["force"]), prune=bool(icfg["prune"]),
+        progress=bool(icfg["progress"]), limits=ReadLimits.from_mapping(icfg["limits"]))
     for rej in report.get("rejected", []):
         log.warning("ingest rejected %s: %s", rej.get("source"), rej.get("reason"))
     if not report.get("n_accepted"):

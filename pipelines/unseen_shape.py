@@ -35,7 +35,7 @@ import pandas as pd
 
 from hysteresis.base import HysteresisModel
 from hysteresis.shape_aware import ShapeAwareModel
-from pipelines import cache, stages
+from pipelines import cache, schemas, stages
 from pipelines.common import (
     Paths,
     dataset_hash,
@@ -163,29 +163,29 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     from pipelines.fit import load_models
 
     start = time.perf_counter()
+    cfg = schemas.with_defaults(schemas.UnseenShapeConfig, cfg)
     paths = Paths.from_config(cfg["paths"])
     if dataset is None:
         dataset = read_processed(paths.processed)
-    sig = cfg.get("signals") or {}
-    input_col, output_col = str(sig.get("input", "input")), str(sig.get("output", "output"))
+    input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
     stages.check_dataset(dataset, signals=(input_col, output_col))
-    sel = cfg.get("config") or {}
-    configs = stages.configurations(dataset, rig=sel.get("rig"),
-                                    curve_angle_deg=sel.get("curve_angle_deg"),
-                                    radius_mm=sel.get("radius_mm"))
+    sel = cfg["config"]
+    configs = stages.configurations(dataset, rig=sel["rig"],
+                                    curve_angle_deg=sel["curve_angle_deg"],
+                                    radius_mm=sel["radius_mm"])
     configs = [c for c in configs if c.curve_angle_deg is not None and c.radius_mm is not None]
     if not configs:
         raise PipelineError("unseen_shape needs configurations with a curve angle and a radius")
     rigs = sorted({c.rig for c in configs}, key=lambda r: -sum(c.rig == r for c in configs))
     configs = [c for c in configs if c.rig == rigs[0]]
-    fit_exc = str(cfg.get("fit_excitation", "sine_decay"))
-    eval_kinds = list(cfg.get("eval_excitations") or [])
-    estimator = dict(cfg.get("estimator") or {})
+    fit_exc = str(cfg["fit_excitation"])
+    eval_kinds = list(cfg["eval_excitations"])
+    estimator = dict(cfg["estimator"])
     if fits is None:
         fits = load_models(paths.models)
     ok = fits[(fits["fit_excitation"] == fit_exc) & fits["model_json"].notna()] \
         if not fits.empty else fits
-    wanted = cfg.get("families")
+    wanted = cfg["families"]
     by_label = {c.label: c for c in configs}
     per_family: dict[str, dict[str, str]] = {}
     keys: list[str] = []
@@ -217,7 +217,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     out_summary = reports / "unseen_shape_summary.csv"
     plot = reports / "plots" / "unseen_shape.png"
     key_file = reports / KEY_FILE
-    if cfg.get("cache", True) and key_file.exists() and out_table.exists():
+    if cfg["cache"] and key_file.exists() and out_table.exists():
         try:
             record = json.loads(key_file.read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError):
@@ -239,7 +239,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
             continue
         tasks.append((fam, have, [labelled[c.label] for c in have],
                       {c.label: runs[c.label] for c in have}, estimator))
-    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg.get("n_jobs", 1))
+    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg["n_jobs"])
     if n_jobs > 1 and len(tasks) > 1:
         from joblib import Parallel, delayed
 
@@ -264,8 +264,8 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     with atomic_path(out_summary) as tmp:
         summary.to_csv(tmp, index=False)
     files.append(out_summary)
-    if cfg.get("plot", True) and not table.empty:
-        files.append(figure(table, plot, dpi=int(cfg.get("dpi", 72))))
+    if cfg["plot"] and not table.empty:
+        files.append(figure(table, plot, dpi=int(cfg["dpi"])))
     write_text_atomic(key_file, json.dumps({"key": key}, indent=1))
     seconds = time.perf_counter() - start
     best = _best(summary)
@@ -325,7 +325,7 @@ def main_cfg(cfg: Any) -> UnseenShapeResult:
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
     result = run(plain)
-    tracker = tracking.Tracker(tracking.settings_from_config(plain.get("tracking", {}),
+    tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
                                                              root=paths.root))
     if tracker.enabled:
         with tracking.StageRun(tracker, "unseen_shape", sweep_dir=hydra_sweep_dir()) as stage:

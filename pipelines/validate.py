@@ -24,7 +24,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipelines import stages
+from pipelines import schemas, stages
 from pipelines.common import (
     Paths,
     dataset_hash,
@@ -103,6 +103,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
 
     ``fits`` defaults to every model file under ``${paths.models}`` in the selection.
     """
+    cfg = schemas.with_defaults(schemas.ValidateConfig, cfg)
     paths = Paths.from_config(cfg["paths"])
     clean_leftovers(paths.predictions)  # temporaries of a killed validate
     clean_leftovers(paths.reports, recursive=False)
@@ -110,13 +111,12 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
         dataset = read_processed(paths.processed)
     plan = identification_plan(cfg, dataset, paths)
     dataset = plan.dataset
-    sig = cfg.get("signals") or {}
-    input_col, output_col = str(sig.get("input", "input")), str(sig.get("output", "output"))
+    input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
     stages.check_dataset(dataset, signals=(input_col, output_col))
-    sel = cfg.get("config") or {}
-    configs = stages.configurations(dataset, rig=sel.get("rig"),
-                                    curve_angle_deg=sel.get("curve_angle_deg"),
-                                    radius_mm=sel.get("radius_mm"))
+    sel = cfg["config"]
+    configs = stages.configurations(dataset, rig=sel["rig"],
+                                    curve_angle_deg=sel["curve_angle_deg"],
+                                    radius_mm=sel["radius_mm"])
     fit_excitations = list(plan.fit_excitations)
     if fits is None:
         fits = load_models(paths.models)
@@ -127,9 +127,9 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
             f"{fit_excitations} under {paths.models}; run `make fit` first"
         )
     heldout = list(plan.heldout)
-    cross = bool(cfg.get("cross", False))
+    cross = bool(cfg["cross"])
     settings = {"heldout": heldout, "cross": cross, "signals": [input_col, output_col]}
-    use_cache = bool(cfg.get("cache", True))
+    use_cache = bool(cfg["cache"])
 
     start = time.perf_counter()
     done: list[pd.DataFrame] = []
@@ -152,9 +152,9 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
             errors.extend(meta.get("errors", []))
         else:
             todo.append((group, signals, key, path))
-    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg.get("n_jobs", 1))
+    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg["n_jobs"])
     results = _run_tasks(todo, heldout=heldout, cross=cross, n_jobs=n_jobs,
-                         progress=bool(cfg.get("progress", False)))
+                         progress=bool(cfg["progress"]))
     for metrics, errs in results:
         done.append(metrics)
         errors.extend(errs)
@@ -219,7 +219,7 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
     metrics, errors = run(plain)
-    tracker = tracking.Tracker(tracking.settings_from_config(plain.get("tracking", {}),
+    tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
                                                              root=paths.root))
     if tracker.enabled:
         with tracking.StageRun(tracker, "validate", sweep_dir=hydra_sweep_dir()) as stage_run:

@@ -38,7 +38,8 @@ class ReadLimits:
 
     #: One stream file (``.csv`` or ``.csv.gz``) on disk, and a foreign log file.
     max_file_mb: float = 40.0
-    #: The text of one ``.csv.gz`` after decompression.
+    #: The text of one ``.csv.gz``, and one rosbag1 bz2/lz4 chunk, after decompression (a
+    #: bomb stops here).
     max_decompressed_mb: float = 40.0
     #: ``manifest.json`` (and a bag's side-car manifest).
     max_manifest_mb: float = 1.0

@@ -117,3 +117,116 @@ def test_discrepancy_workflow_is_a_typed_node_with_its_defaults_in_one_place() -
     forced = to_container(_compose("discrepancy", ["+workflow.max_efects=2"]))["workflow"]
     with pytest.raises(DiscrepancyError, match=r"unknown workflow setting\(s\) \['max_efects'\]"):
         workflow_settings(forced)
+
+
+#: Per converted stage: an override with a misspelt key and one with a mistyped value.
+BAD_OVERRIDES = {
+    "generate": ("compres=true", "n_jobs=two"),
+    "ingest": ("sync.max_latncy_ms=500", "prune=sometimes"),
+    "fit": ("fit_excitation=[sine_decay]", "single_run_heldout_fraction=a_third"),
+    "validate": ("held_out=[triangle_decay]", "cross=sometimes"),
+    "unseen_shape": ("estimator.methd=rbf", "dpi=high"),
+    "report": ("plots.max_point=500", "plots.dpi=[72]"),
+}
+
+
+def _schema_defaults(stage: str) -> dict[str, object]:
+    """The stage schema's own settings with their dataclass defaults (groups left out)."""
+    from dataclasses import asdict, fields
+
+    from omegaconf import MISSING
+
+    from pipelines.schemas import STAGE_SCHEMAS
+
+    schema = STAGE_SCHEMAS[stage]
+    groups = {"paths", "tracking", "rig", "campaign", "effects", "importer", "family"}
+    values = asdict(schema())
+    return {f.name: values[f.name] for f in fields(schema)
+            if f.name not in groups and values[f.name] != MISSING}
+
+
+def test_every_stage_has_a_schema() -> None:
+    from pipelines.schemas import STAGE_SCHEMAS
+
+    assert set(STAGE_SCHEMAS) == set(BAD_OVERRIDES)
+
+
+@pytest.mark.parametrize("stage", sorted(BAD_OVERRIDES))
+def test_stage_defaults_come_from_its_schema(stage: str) -> None:
+    plain = to_container(_compose(stage))
+    defaults = _schema_defaults(stage)
+    assert defaults and {k: plain[k] for k in defaults} == defaults
+    # the YAML holds no setting of its own but interpolations (out: ${paths.raw} ...)
+    own = OmegaConf.load(CONF_DIR / f"{stage}.yaml")
+    for key in own:
+        if key not in ("defaults", "hydra"):
+            assert OmegaConf.is_interpolation(own, str(key)), f"{stage}.yaml sets {key}"
+
+
+@pytest.mark.parametrize("stage", sorted(BAD_OVERRIDES))
+def test_stage_rejects_a_misspelt_or_mistyped_override(stage: str) -> None:
+    from hydra.errors import ConfigCompositionException
+
+    misspelt, mistyped = BAD_OVERRIDES[stage]
+    for bad in (misspelt, mistyped):
+        with pytest.raises(ConfigCompositionException):
+            _compose(stage, [bad])
+
+
+def test_typed_overrides_reach_the_stage() -> None:
+    ingest = to_container(_compose("ingest", ["sync.max_latency_ms=500",
+                                              "limits.max_file_mb=200"]))
+    assert ingest["sync"]["max_latency_ms"] == 500.0
+    assert ingest["limits"]["max_file_mb"] == 200.0
+    unseen = to_container(_compose("unseen_shape", ["families=[gamma]", "estimator.method=rbf"]))
+    assert unseen["families"] == ["gamma"] and unseen["estimator"]["method"] == "rbf"
+    report = to_container(_compose("report", ["plots.per_configuration=false", "formats=[md]"]))
+    assert report["plots"]["per_configuration"] is False and report["formats"] == ["md"]
+
+
+def test_a_hand_written_stage_config_gets_the_schema_defaults_and_checks() -> None:
+    from omegaconf.errors import ValidationError
+
+    from pipelines.schemas import FitConfig, ReportConfig, with_defaults
+
+    cfg = with_defaults(FitConfig, {"paths": {"root": "x"}, "config": {"radius_mm": 30},
+                                    "heldout": []})
+    assert cfg["config"] == {"rig": None, "curve_angle_deg": None, "radius_mm": 30}
+    assert cfg["fit_excitations"] == ["sine_decay"] and cfg["families"] == "all"
+    assert cfg["heldout"] == [] and cfg["paths"] == {"root": "x"}  # other keys pass through
+    assert "tracking" not in cfg  # a group left unset is left out
+    assert with_defaults(ReportConfig, {"plots": {"dpi": 30}})["plots"] == {
+        "per_configuration": True, "dpi": 30, "max_points": 1500}
+    with pytest.raises(ValidationError, match="n_jobs"):
+        with_defaults(FitConfig, {"n_jobs": "two"})
+
+
+def test_unseen_shape_estimator_defaults_are_the_models() -> None:
+    import inspect
+    from dataclasses import asdict
+
+    from hysteresis.shape_aware import ShapeAwareModel
+    from pipelines.schemas import ShapeAwareEstimator
+
+    params = inspect.signature(ShapeAwareModel.__init__).parameters
+    assert asdict(ShapeAwareEstimator()) == {
+        k: params[k].default for k in asdict(ShapeAwareEstimator())}
+
+
+@pytest.mark.parametrize("experiment", ["quick", "cross_excitation", "gamma_only",
+                                        "bending_joint"])
+def test_pipeline_experiments_compose_every_stage(experiment: str, tmp_path: Path) -> None:
+    from pipelines.run_all import OWN_STAGES, compose_stage, stage_overrides
+
+    pipeline = to_container(_compose("pipeline", [f"+experiment={experiment}",
+                                                  f"paths.root={tmp_path}"]))
+    for stage in ("generate", "ingest"):
+        assert compose_stage(stage, stage_overrides(stage, pipeline))["out"]
+    for stage in OWN_STAGES:
+        cfg = stage_config(stage, pipeline)
+        assert set(_schema_defaults(stage)) <= set(cfg)
+    if experiment == "gamma_only":
+        assert stage_config("fit", pipeline)["families"] == ["gamma"]
+    if experiment == "bending_joint":
+        generate = compose_stage("generate", stage_overrides("generate", pipeline))
+        assert generate["effects"]["time_delay"] == 12.0
