@@ -736,7 +736,16 @@ def fit_joint(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect, 
     candidate is also fitted *first*, the earlier terms are searched again on top of it, and the
     two joint fits compete on the identification run. The terms keep their order (the newest
     last), which the composed model does not depend on.
+
+    A screened base (an iterative fit: Bouc-Wen, Preisach, Coleman-Hodgdon) runs the whole
+    search on its fast screening base and is fitted once with the terms found: the search
+    compares dozens of parameter sets, each a refit of the base, and the physical parameters
+    do not depend on the hysteresis model beneath them.
     """
+    screen: BaseFactory | None = getattr(base_factory, "screen", None)
+    if screen is not None:
+        found = fit_joint(screen, fixed, effect, ident, iterations=iterations)
+        return ComposedModel(base_factory, found.terms, iterations=iterations).fit(ident)
     on_top = retune(base_factory, fit_with_effect(base_factory, fixed, effect, ident,
                                                   iterations=iterations), ident,
                     iterations=iterations)

@@ -120,6 +120,14 @@ def _play(u: FloatArray, up: FloatArray, down: FloatArray) -> FloatArray:
     return z
 
 
+#: Speed scale of the friction's speed law (mm/s): half the identification sine's top speed.
+#: One law for every run: a scale taken from each run's own speeds would give the held-out
+#: runs a different friction law from the identifying one.
+FRICTION_SPEED_MM_S = 4.7
+#: Largest tendon tension of the drive's law (N): the stretch's normaliser, fixed for the same
+#: reason.
+TENSION_TOP_N = 7.4
+
 #: Physical size of each effect at strength 1 (strength 2 doubles it).
 SIZES: dict[str, float] = {
     "time_delay": 0.12,         # s
@@ -153,11 +161,10 @@ def inject(family: str, effects: Mapping[str, float], kind: str, *, seed: int = 
     tension = 2.0 + 0.4 * (ut - ut.min()) + 0.6 * dirn
     if "tendon_elongation" in effects:
         k = SIZES["tendon_elongation"] * effects["tendon_elongation"]
-        ut = ut - k * (tension**2 - tension[0] ** 2) / float(np.max(tension**2))
+        ut = ut - k * (tension**2 - tension[0] ** 2) / TENSION_TOP_N**2
     if "rate_dependence" in effects:
         width = SIZES["rate_dependence"] * effects["rate_dependence"]
-        vmax = float(np.percentile(np.abs(vel), 99))
-        lost = width * np.tanh(np.abs(vel) / (0.5 * vmax))
+        lost = width * np.tanh(np.abs(vel) / FRICTION_SPEED_MM_S)
         ut = _play(ut, lost, lost)
     if "asymmetry" in effects:
         a = SIZES["asymmetry"] * effects["asymmetry"]
