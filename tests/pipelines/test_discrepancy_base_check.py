@@ -12,7 +12,7 @@ from hydra import compose, initialize_config_dir
 from hysteresis.discrepancy.inject import injected_runs
 from hysteresis.discrepancy.workflow import base_factory_for, run_workflow
 from pipelines.common import CONF_DIR, to_container
-from pipelines.discrepancy import base_misfit, headline
+from pipelines.discrepancy import analyse, base_misfit, headline, pick_base
 
 
 @pytest.fixture(scope="module")
@@ -37,3 +37,43 @@ def test_a_base_that_fits_is_not_flagged(families: dict[str, Any]) -> None:
     assert [e["name"] for e in rep["effects"]] == ["time_delay"]
     assert base_misfit(runs, rep, families, factor=1.5) is None
     assert "caution" not in headline({**rep, "base_misfit": None})
+
+
+def _result(verdict: str, effects: list[str], after: float) -> dict[str, Any]:
+    return {"verdict": verdict, "effects": [{"name": n} for n in effects],
+            "summary": {"heldout_rmse_after": after}}
+
+
+def test_pick_base_keeps_the_best_plain_family_unless_another_explains_clearly_more() -> None:
+    first = ("bouc_wen", _result("missing_effects_found", ["drift"], 0.10))
+    # clearly better with its terms: taken
+    assert pick_base([first, ("gamma_free", _result("missing_effects_found", ["drift"], 0.03))],
+                     min_gain=0.2)[0] == "gamma_free"
+    # a near tie keeps the best plain family
+    assert pick_base([first, ("gamma_free", _result("missing_effects_found", ["drift"], 0.09))],
+                     min_gain=0.2)[0] == "bouc_wen"
+    # a later family that adds nothing while the first named an effect is not taken
+    assert pick_base([first, ("preisach", _result("unexplained", [], 0.01))],
+                     min_gain=0.2)[0] == "bouc_wen"
+    # the best plain family found nothing to explain: a worse-fitting family's terms are its
+    # own misfit
+    clean = ("preisach", _result("no_missing_effect", [], 0.02))
+    assert pick_base([clean, ("gamma", _result("missing_effects_found", ["asymmetry"], 0.01))],
+                     min_gain=0.2)[0] == "preisach"
+
+
+def test_auto_base_tries_the_next_family_when_the_first_leaves_the_effect_half_explained(
+        families: dict[str, Any]) -> None:
+    """Stretch injected into a Preisach plant: Bouc-Wen fits best plain, but Bouc-Wen plus
+    the stretch term leaves the residual above the retry bar; Preisach plus the term halves
+    the best plain error, so the stage keeps it and says which bases it tried."""
+    runs = injected_runs("preisach", {"tendon_elongation": 1.0})
+    pair = {k: families[k] for k in ("bouc_wen", "preisach")}
+    rep, _ = analyse(runs, auto_families=pair, max_bases=2, base_retry_factor=1.5)
+    assert [t["base"] for t in rep["bases_tried"]] == ["bouc_wen", "preisach"]
+    assert rep["base_family"] == "preisach"
+    assert [e["name"] for e in rep["effects"]][:1] == ["tendon_elongation"]
+    assert rep["summary"]["heldout_reduction_vs_best_plain"] >= 0.5
+    assert "base chosen with its terms (best plain family: bouc_wen" in rep["headline"]
+    one, _ = analyse(runs, auto_families=pair, max_bases=1)
+    assert one["base_family"] == "bouc_wen" and len(one["bases_tried"]) == 1
