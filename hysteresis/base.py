@@ -17,6 +17,7 @@ from __future__ import annotations
 import functools
 import inspect
 import json
+from collections.abc import Sequence
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -204,6 +205,15 @@ class HysteresisModel:
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
         return f"{type(self).__name__}({args})"
+
+    @classmethod
+    def structure_candidates(cls, models: Sequence[HysteresisModel]) -> list[dict[str, Any]]:
+        """Hyper-parameter sets to refit ``models`` (fitted models of this family, e.g. one
+        per sheath shape) with so that their fitted parameters compare element by element;
+        ``[]`` when they already do. Only a family whose fit chooses its structure from the
+        data (Gamma's play widths) returns any; the caller keeps the candidate that fits the
+        records best (:func:`hysteresis.shape_aware.refit_on_common_structure`)."""
+        return []
 
     # -- fitted state -----------------------------------------------------------------
     def fitted_attributes(self) -> dict[str, Any]:

@@ -34,8 +34,9 @@ Brent's golden-section/parabolic method like Matlab's FMINBND).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from scipy.optimize import lsq_linear, minimize_scalar
@@ -44,6 +45,7 @@ from hysteresis._blas import single_thread_blas
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
+    HysteresisModel,
     StatefulModel,
     as_1d,
     check_inverse_reach,
@@ -167,6 +169,18 @@ class GammaModel(StatefulModel):
         # no identification record: the widest play stands for its span (bounded search tolerance)
         model.input_span_ = float(p.max()) or 1.0
         return model
+
+    @classmethod
+    def structure_candidates(cls, models: Sequence[HysteresisModel]) -> list[dict[str, Any]]:
+        """Each distinct threshold grid of ``models`` when their fits chose different ones:
+        weights of plays of different widths do not compare, so a regression over shapes
+        needs every model refitted on one grid."""
+        grids: list[FloatArray] = []
+        for m in cast("Sequence[GammaModel]", models):
+            g = np.asarray(m.thresholds_, dtype=np.float64)
+            if not any(g.shape == h.shape and np.array_equal(g, h) for h in grids):
+                grids.append(g)
+        return [] if len(grids) < 2 else [{"thresholds": g.tolist()} for g in grids]
 
     # -- hyper-parameters -------------------------------------------------------------
     def _threshold_candidates(self, uu: FloatArray) -> list[FloatArray]:

@@ -13,8 +13,13 @@ a set of configurations and hands out a model of the same family for any other o
   ``b <= curvature_degree``; ridge-regularised least squares on features scaled to [0, 1]),
   or interpolated by a thin-plate radial basis function (``method="rbf"``);
 * everything else (integer and boolean attributes, attributes whose shape differs between
-  configurations, and attributes equal on every configuration, such as Gamma's preassigned
+  configurations, and attributes equal on every configuration, such as Gamma's shared
   thresholds) is taken from the nearest training configuration.
+
+A family whose fit chooses its structure from the data (Gamma picks its play widths from each
+record) gives parameters that do not compare between shapes: the records are then refitted
+with the family's :meth:`~hysteresis.base.HysteresisModel.common_structure` (one grid for all),
+and fitted models that disagree are refused.
 
 Because the regression is linear in the training values, a linear constraint every training
 model satisfies (Gamma's ``sum(Q) = 1``) holds for the predicted model too.
@@ -27,7 +32,9 @@ registered family (the fit stage must not identify it on one record).
 
 from __future__ import annotations
 
+import json
 import math
+import warnings
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -122,6 +129,14 @@ class ShapeAwareModel(HysteresisModel):
         if len(items) < 2:
             raise HysteresisError("need at least two configurations to learn a shape dependence")
         models = [self._model_of(item) for item in items]
+        if type(models[0]).structure_candidates(models):
+            if any(isinstance(item, HysteresisModel) for item in items):
+                raise HysteresisError(
+                    f"the {self.base_family} models were fitted with different structures "
+                    f"(e.g. Gamma's play widths), so their parameters cannot be regressed on "
+                    f"the shape; pass (u, y) records, or refit them with "
+                    f"refit_on_common_structure")
+            models, _ = refit_on_common_structure(models, [check_pair(*it) for it in items])
         feats = shape_features(shapes[:, 0], shapes[:, 1])
         if np.unique(feats, axis=0).shape[0] != feats.shape[0]:
             raise HysteresisError("a configuration is given twice")
@@ -247,3 +262,42 @@ def _float_stack(column: Sequence[Any]) -> FloatArray | None:
         return None
     stacked = np.stack(arrays).astype(np.float64)
     return stacked if np.all(np.isfinite(stacked)) else None
+
+
+
+def refit_on_common_structure(
+    models: Sequence[HysteresisModel], records: Sequence[tuple[FloatArray, FloatArray]], *,
+    keys: Sequence[Any] | None = None, memo: dict[tuple[Any, str], HysteresisModel] | None = None,
+) -> tuple[list[HysteresisModel], dict[str, Any]]:
+    """``models`` (one family, each fitted on its record) refitted with one common structure,
+    so their parameters compare: of the family's
+    :meth:`~hysteresis.base.HysteresisModel.structure_candidates`, the one with the least
+    summed squared error over all the records. Returns the models unchanged and ``{}`` when
+    they already share a structure.
+
+    ``memo`` (keyed by ``keys[i]``, default the index, and the candidate) keeps refits between
+    calls on overlapping sets (leave-one-out folds).
+    """
+    if len(records) != len(models):
+        raise HysteresisError(f"{len(models)} models but {len(records)} records")
+    candidates = type(models[0]).structure_candidates(models) if models else []
+    if not candidates:
+        return list(models), {}
+    ids = list(keys) if keys is not None else list(range(len(models)))
+    store = memo if memo is not None else {}
+    best: tuple[float, list[HysteresisModel], dict[str, Any]] | None = None
+    for cand in candidates:
+        tag = json.dumps(cand, sort_keys=True)
+        refits, sse = [], 0.0
+        for key, model, (u, y) in zip(ids, models, records, strict=True):
+            if (key, tag) not in store:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    store[(key, tag)] = type(model)(**{**model.get_params(), **cand}).fit(u, y)
+            refit = store[(key, tag)]
+            sse += float(np.sum((np.asarray(y) - refit.predict(u)) ** 2))
+            refits.append(refit)
+        if best is None or sse < best[0]:
+            best = (sse, refits, cand)
+    assert best is not None
+    return best[1], best[2]

@@ -33,8 +33,8 @@ import hydra
 import numpy as np
 import pandas as pd
 
-from hysteresis.base import HysteresisModel
-from hysteresis.shape_aware import ShapeAwareModel
+from hysteresis.base import HysteresisModel, family_class
+from hysteresis.shape_aware import ShapeAwareModel, refit_on_common_structure
 from pipelines import cache, schemas, stages
 from pipelines.common import (
     Paths,
@@ -88,18 +88,34 @@ def _rmse(model: HysteresisModel, runs: Sequence[RunSignal]) -> float:
 
 def leave_one_out(family: str, configs: Sequence[Configuration],
                   models: Sequence[HysteresisModel], runs: Mapping[str, Sequence[RunSignal]],
-                  estimator: Mapping[str, Any]) -> list[dict[str, Any]]:
+                  estimator: Mapping[str, Any],
+                  records: Sequence[tuple[np.ndarray, np.ndarray] | None] | None = None,
+                  ) -> list[dict[str, Any]]:
     """Rows (:data:`COLUMNS`) of one family: own, nearest and shape-aware per configuration.
 
     ``runs`` maps a configuration label to its evaluation runs. A predictor whose model
-    fails to simulate scores NaN (recorded, never raised).
+    fails to simulate scores NaN (recorded, never raised). ``records``: each configuration's
+    identification ``(u, y)``; when the other configurations' models chose different
+    structures (Gamma's play widths), the shape-aware model is learnt from models refitted
+    on them with one common structure (the own and nearest predictors keep the fit stage's
+    models).
     """
     rows: list[dict[str, Any]] = []
     shapes = [(float(c.curve_angle_deg or 0.0), float(c.radius_mm or 0.0)) for c in configs]
+    memo: dict[tuple[Any, str], HysteresisModel] = {}
+
+    def training(others: Sequence[int]) -> list[HysteresisModel]:
+        train = [models[j] for j in others]
+        if records is None or any(records[j] is None for j in others):
+            return train
+        refits, _ = refit_on_common_structure(
+            train, [records[j] for j in others], keys=others, memo=memo)  # type: ignore[misc]
+        return refits
+
     for i, config in enumerate(configs):
         others = [j for j in range(len(configs)) if j != i]
         sa = ShapeAwareModel(base_family=family, **dict(estimator))
-        sa.fit([shapes[j] for j in others], [models[j] for j in others])
+        sa.fit([shapes[j] for j in others], training(others))
         phi, r = shapes[i]
         for name in PREDICTORS:
             try:
@@ -151,10 +167,26 @@ def summarise(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def _family_task(family: str, configs: list[Configuration], model_json: list[str],
-                 runs: dict[str, list[RunSignal]], estimator: dict[str, Any]
+                 runs: dict[str, list[RunSignal]], estimator: dict[str, Any],
+                 records: list[tuple[np.ndarray, np.ndarray] | None] | None = None
                  ) -> list[dict[str, Any]]:
     models = [stages.load_model(j) for j in model_json]
-    return leave_one_out(family, configs, models, runs, estimator)
+    if type(models[0]).structure_candidates(models):
+        log.info("unseen_shape: %s: the configurations' fits chose different structures; each "
+                 "fold's shape-aware model learns from refits on the structure that fits its "
+                 "training configurations best", family)
+    return leave_one_out(family, configs, models, runs, estimator, records)
+
+
+def identification_record(by_kind: Mapping[str, Sequence[RunSignal]], run_ids: str,
+                          n_samples: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """The ``(u, y)`` a fit row identified on (its first ``n_samples``: a single-run
+    configuration identifies on the run's head), or None when the run is not in the data."""
+    wanted = run_ids.split(",")
+    found = [r for rs in by_kind.values() for r in rs if r.run_id in wanted]
+    if len(found) != 1 or found[0].u.size < n_samples:
+        return None
+    return found[0].u[:n_samples], found[0].y[:n_samples]
 
 
 def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
@@ -188,6 +220,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     wanted = cfg["families"]
     by_label = {c.label: c for c in configs}
     per_family: dict[str, dict[str, str]] = {}
+    fit_rows: dict[str, dict[str, tuple[str, int]]] = {}
     keys: list[str] = []
     for rec in ok.to_dict("records"):
         c = Configuration(str(rec["rig"]), stages._num(rec["curve_angle_deg"]),
@@ -195,12 +228,16 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
         if c.label not in by_label or (wanted and rec["family"] not in wanted):
             continue
         per_family.setdefault(str(rec["family"]), {})[c.label] = str(rec["model_json"])
+        fit_rows.setdefault(str(rec["family"]), {})[c.label] = (
+            str(rec.get("fit_run_ids") or ""), int(rec.get("n_samples") or 0))
         keys.append(str(rec["key"]))
 
     runs: dict[str, list[RunSignal]] = {}
+    signals: dict[str, dict[str, list[RunSignal]]] = {}
     for c in configs:
         by_kind = stages.run_signals(stages.config_rows(dataset, c), input_col=input_col,
                                      output_col=output_col)
+        signals[c.label] = by_kind
         kinds = eval_kinds or sorted(k for k in by_kind if k != fit_exc)
         runs[c.label] = [r for k in kinds for r in by_kind.get(k, [])]
     settings = {"fit_excitation": fit_exc, "eval_excitations": eval_kinds,
@@ -209,8 +246,11 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     key = cache.combine({
         "stage": "unseen_shape", "models": sorted(keys), "settings": settings,
         "data": sorted(r.data_hash for rs in runs.values() for r in rs),
-        "code": cache.hash_files([Path(__file__),
-                                  Path(__file__).parents[1] / "hysteresis" / "shape_aware.py"]),
+        # the refits on a common structure run the families' own code
+        "code": [cache.hash_files([Path(__file__),
+                                   *cache.code_files("hysteresis.shape_aware").values()]),
+                 *(cache.hash_files(cache.code_files(family_class(f).__module__).values())
+                   for f in sorted(per_family))],
     })
     reports = paths.reports
     out_table = reports / "unseen_shape.parquet"
@@ -238,7 +278,9 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
                         "runs; leave-one-out needs 3", fam, len(have))
             continue
         tasks.append((fam, have, [labelled[c.label] for c in have],
-                      {c.label: runs[c.label] for c in have}, estimator))
+                      {c.label: runs[c.label] for c in have}, estimator,
+                      [identification_record(signals[c.label], *fit_rows[fam][c.label])
+                       for c in have]))
     n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg["n_jobs"])
     if n_jobs > 1 and len(tasks) > 1:
         from joblib import Parallel, delayed

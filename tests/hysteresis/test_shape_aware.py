@@ -8,7 +8,7 @@ import pytest
 from hysteresis.base import HysteresisError, HysteresisModel
 from hysteresis.gamma import GammaModel
 from hysteresis.linear import LinearModel
-from hysteresis.shape_aware import ShapeAwareModel, shape_features
+from hysteresis.shape_aware import ShapeAwareModel, refit_on_common_structure, shape_features
 
 ANGLES = (15.0, 30.0, 45.0, 60.0, 75.0, 90.0)
 RADII = (30.0, 45.0, 60.0, 75.0)
@@ -87,6 +87,39 @@ def test_fits_from_records_and_round_trips_through_json() -> None:
     drive = sa.invert(target, curve_angle_deg=45.0, radius_mm=45.0)
     np.testing.assert_allclose(sa.predict(drive, curve_angle_deg=45.0, radius_mm=45.0), target,
                                atol=1e-9)
+
+
+def _widening_plant(phi: float) -> GammaModel:
+    """Plays widening with the wrap angle: default fits choose different widest plays."""
+    top = 0.5 + 5.0 * np.radians(phi)
+    p = np.linspace(0.0, top, 6)
+    q = np.full(6, 1.0 / 6.0)
+    return GammaModel.from_params(p, q)
+
+
+def test_models_fitted_on_different_play_grids_are_refitted_on_one() -> None:
+    u = _u()
+    shapes = [(15.0, 45.0), (45.0, 45.0), (90.0, 45.0), (45.0, 75.0)]
+    records = [(u, _widening_plant(phi).predict(u)) for phi, _ in shapes]
+    own = [GammaModel().fit(uu, yy) for uu, yy in records]
+    assert len({float(m.thresholds_.max()) for m in own}) > 1  # the premise: grids differ
+    # fitted models on different grids: their weights do not compare, so they are refused
+    with pytest.raises(HysteresisError, match="different structures"):
+        ShapeAwareModel(base_family="gamma", angle_degree=1).fit(shapes, own)
+    refits, chosen = refit_on_common_structure(own, records)
+    grids = {tuple(m.thresholds_) for m in refits}
+    assert grids == {tuple(chosen["thresholds"])}
+    # the chosen grid is the candidate with the least summed squared error over the records
+    def total(grid: list[float]) -> float:
+        return sum(float(np.sum((yy - GammaModel(thresholds=grid).fit(uu, yy).predict(uu)) ** 2))
+                   for uu, yy in records)
+    candidates = {tuple(m.thresholds_) for m in own}
+    assert total(chosen["thresholds"]) <= min(total(list(g)) for g in candidates) + 1e-12
+    # from records the shape-aware model does this itself
+    sa = ShapeAwareModel(base_family="gamma", angle_degree=1).fit(shapes, records)
+    assert len({tuple(HysteresisModel.from_dict(d).thresholds_)  # type: ignore[attr-defined]
+                for d in sa.models_}) == 1
+    assert sa.score(u, records[1][1], curve_angle_deg=45.0, radius_mm=45.0) > 0.95
 
 
 def test_degrees_follow_what_the_shapes_resolve_and_rbf_interpolates() -> None:
