@@ -35,6 +35,7 @@ from hysteresis.discrepancy.workflow import (
     run_workflow,
     strip_private,
 )
+from pipelines import schemas
 from rig_io.atomic import (
     atomic_path,
     clean_leftovers,
@@ -365,8 +366,11 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
 def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     """Run the stage from a plain config mapping; returns the JSON report (also written).
 
+    ``cfg``: a composed ``conf/discrepancy.yaml`` or a hand-written mapping; settings it
+    leaves out take their defaults from :class:`pipelines.schemas.DiscrepancyConfig`.
     The edges: ingest the source, :func:`analyse`, then plots, the report file and MLflow."""
     t0 = time.perf_counter()
+    cfg = schemas.with_defaults(schemas.DiscrepancyConfig, cfg)
     if not cfg.get("source"):
         raise DiscrepancyError("source=<dir of raw runs or bags> is required")
     if not cfg.get("report"):
@@ -374,38 +378,35 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     report_path = Path(str(cfg["report"])).resolve()
     clean_leftovers(report_path.parent, recursive=False)  # temporaries of a killed run
     clean_leftovers(report_path.parent / f"{report_path.stem}_plots")
-    progress = bool(cfg.get("progress", True))
-    settings = workflow_settings(cfg.get("workflow"), progress=progress)
+    progress = bool(cfg["progress"])
+    settings = workflow_settings(cfg["workflow"], progress=progress)
     clean_owned_temp(TEMP_TAG)  # work folders of killed runs
     with tempfile.TemporaryDirectory(prefix=owned_prefix(TEMP_TAG)) as tmp:
         rows, meta, ingest_rep = ingest_source(cfg["source"], Path(tmp),
-                                               mapping=cfg.get("importer"), progress=progress)
-    sig = dict(cfg.get("signals") or {})
+                                               mapping=cfg["importer"], progress=progress)
     runs = runs_from_dataset(
-        rows, meta, identify_excitations=list(cfg.get("identify_excitations") or ["sine_decay"]),
-        input_col=str(sig.get("input", "input")), output_col=str(sig.get("output", "output")),
-        rate_hz=cfg.get("analysis_rate_hz"))
+        rows, meta, identify_excitations=list(cfg["identify_excitations"]),
+        input_col=str(cfg["signals"]["input"]), output_col=str(cfg["signals"]["output"]),
+        rate_hz=cfg["analysis_rate_hz"])
     # one run per configuration (a common way to record): its head identifies, its tail judges
     try:
         runs, run_choice = split_single_runs(
-            runs, heldout_fraction=float(cfg.get("single_run_heldout_fraction", 0.3)))
+            runs, heldout_fraction=float(cfg["single_run_heldout_fraction"]))
     except HysteresisError as err:
         raise DiscrepancyError(str(err)) from None
     for key, note in run_choice.items():
         log.info("discrepancy: %s: %s", key, note)
     report, full = analyse(
-        runs, base_family=str(cfg.get("base_family", "auto")),
-        base_params=cfg.get("base_params"), auto_families=dict(cfg.get("auto_families") or {}),
-        settings=settings, ukf_evidence=bool(cfg.get("ukf_evidence", False)),
-        base_check=bool(cfg.get("base_check", True)),
-        base_misfit_factor=float(cfg.get("base_misfit_factor", 1.5)),
-        max_bases=int(cfg.get("max_bases", 2)),
-        base_retry_factor=float(cfg.get("base_retry_factor", 1.5)))
+        runs, base_family=str(cfg["base_family"]), base_params=cfg["base_params"],
+        auto_families=cfg["auto_families"], settings=settings,
+        ukf_evidence=bool(cfg["ukf_evidence"]), base_check=bool(cfg["base_check"]),
+        base_misfit_factor=float(cfg["base_misfit_factor"]), max_bases=int(cfg["max_bases"]),
+        base_retry_factor=float(cfg["base_retry_factor"]))
     report["run_choice"] = run_choice or None
     report["source"] = str(Path(str(cfg["source"])).resolve())
     report["ingest"] = {"accepted": ingest_rep["n_accepted"], "rejected": ingest_rep["rejected"]}
     plots = plot_report(full, report_path.parent / f"{report_path.stem}_plots") \
-        if cfg.get("plots", True) else []
+        if cfg["plots"] else []
     report["plots"] = [str(p) for p in plots]
     report["elapsed_s"] = round(time.perf_counter() - t0, 3)
     write_text_atomic(report_path, json.dumps(report, indent=1, default=_json_default) + "\n")
@@ -502,7 +503,7 @@ def _track(cfg: Mapping[str, Any], report: Mapping[str, Any], report_path: Path,
                       "effects": ",".join(e["name"] for e in report["effects"]) or "none",
                       "measured_within_reach": ",".join(
                           m["name"] for m in report.get("measured_within_reach", [])) or "none",
-                      **{f"workflow.{k}": v for k, v in (cfg.get("workflow") or {}).items()}}
+                      **{f"workflow.{k}": v for k, v in cfg["workflow"].items()}}
             tracker.log(run_id, params=params,
                         metrics={k: float(v) for k, v in metrics.items() if math.isfinite(v)})
             tracker.log_artifact(run_id, report_path, "reports")

@@ -36,6 +36,7 @@ from hysteresis.discrepancy.workflow import (
     base_factory_for,
     run_workflow,
 )
+from pipelines import schemas
 from rig_io.atomic import write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -284,17 +285,22 @@ def _fmt(x: float | None) -> str:
 
 
 def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """Run the stage from a plain config mapping; writes ``<out>.json`` and ``<out>.md``."""
-    out = Path(str(cfg.get("out") or "")).resolve()
+    """Run the stage from a plain config mapping; writes ``<out>.json`` and ``<out>.md``.
+
+    ``cfg``: a composed ``conf/discrepancy_study.yaml`` or a hand-written mapping; settings
+    it leaves out take their defaults from :class:`pipelines.schemas.DiscrepancyStudyConfig`
+    (a mapping given, e.g. ``combinations={}``, replaces the default one whole)."""
+    cfg = schemas.with_defaults(schemas.DiscrepancyStudyConfig, cfg)
     if not cfg.get("out"):
         raise StudyError("out=<path stem> is required")
-    chosen = cfg.get("pairs_selected") or list((cfg.get("pairs") or {}).keys())
-    all_pairs = dict(cfg.get("pairs") or {})
+    out = Path(str(cfg["out"])).resolve()
+    all_pairs = dict(cfg["pairs"])
+    chosen = cfg["pairs_selected"] or list(all_pairs)
     missing = [p for p in chosen if p not in all_pairs]
     if missing:
         raise StudyError(f"unknown pair(s) {missing}; defined: {sorted(all_pairs)}")
-    strengths = dict(cfg.get("strengths") or {})
-    effects = cfg.get("effects_selected")
+    strengths = dict(cfg["strengths"])
+    effects = cfg["effects_selected"]
     if effects is not None:
         unknown = sorted(set(effects) - set(strengths))
         if unknown:
@@ -302,7 +308,7 @@ def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
                              f"defined: {sorted(strengths)}")
         strengths = {e: strengths[e] for e in effects}
     # Check the two-effect part before the long single-effect part runs.
-    combos_cfg = dict(cfg.get("combinations") or {})
+    combos_cfg = dict(cfg["combinations"])  # a free mapping: no strengths = no such cases
     cpairs = list(combos_cfg.get("pairs_selected") or [])
     if combos_cfg.get("strengths"):
         from rig_io.virtual.effects import EFFECT_NAMES
@@ -317,25 +323,21 @@ def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
                              f"known: {list(EFFECT_NAMES)}")
     t0 = time.perf_counter()
     cases = run_study(strengths=strengths,
-                      pairs={p: all_pairs[p] for p in chosen}, seed=int(cfg.get("seed", 3)),
-                      rate_hz=float(cfg.get("rate_hz", 20.0)),
-                      base=str(cfg.get("base_family", "gamma")),
-                      workflow=dict(cfg.get("workflow") or {}),
-                      n_jobs=int(cfg.get("n_jobs", 2)), progress=bool(cfg.get("progress", True)))
+                      pairs={p: all_pairs[p] for p in chosen}, seed=int(cfg["seed"]),
+                      rate_hz=float(cfg["rate_hz"]), base=str(cfg["base_family"]),
+                      workflow=dict(cfg["workflow"]), n_jobs=int(cfg["n_jobs"]),
+                      progress=bool(cfg["progress"]))
     combos: list[dict[str, Any]] = []
     if combos_cfg.get("strengths"):
         combos = run_combinations(strengths=dict(combos_cfg["strengths"]),
                                   pairs={p: all_pairs[p] for p in cpairs},
-                                  seed=int(cfg.get("seed", 3)),
-                                  rate_hz=float(cfg.get("rate_hz", 20.0)),
-                                  base=str(cfg.get("base_family", "gamma")),
-                                  workflow=dict(cfg.get("workflow") or {}),
-                                  n_jobs=int(cfg.get("n_jobs", 2)),
-                                  progress=bool(cfg.get("progress", True)))
+                                  seed=int(cfg["seed"]), rate_hz=float(cfg["rate_hz"]),
+                                  base=str(cfg["base_family"]), workflow=dict(cfg["workflow"]),
+                                  n_jobs=int(cfg["n_jobs"]), progress=bool(cfg["progress"]))
     doc = {"cases": cases, "detection_limits": detection_limits(cases),
            "combinations": combos,
-           "settings": {k: cfg.get(k) for k in ("seed", "rate_hz", "base_family", "workflow",
-                                               "strengths")},
+           "settings": {k: cfg[k] for k in ("seed", "rate_hz", "base_family", "workflow",
+                                            "strengths")},
            "pairs": {p: all_pairs[p] for p in chosen},
            "elapsed_s": round(time.perf_counter() - t0, 1)}
     json_path, md_path = out.with_suffix(".json"), out.with_suffix(".md")
@@ -366,8 +368,8 @@ def _track(cfg: Mapping[str, Any], cases: Sequence[Mapping[str, Any]],
             metrics["combinations_all_named"] = float(sum(bool(c["all_named"]) for c in combos))
             metrics["combinations_all_added"] = float(sum(bool(c["all_added"]) for c in combos))
             metrics["combinations"] = float(len(combos))
-        params = {"base_family": str(cfg.get("base_family", "gamma")),
-                  **{f"workflow.{k}": str(v) for k, v in (cfg.get("workflow") or {}).items()}}
+        params = {"base_family": str(cfg["base_family"]),
+                  **{f"workflow.{k}": str(v) for k, v in cfg["workflow"].items()}}
         tracker.log(run_id, params=params, metrics=metrics)
         for f in files:
             tracker.log_artifact(run_id, f, "reports")

@@ -32,7 +32,7 @@ from typing import Any
 import hydra
 import pandas as pd
 
-from pipelines import cache
+from pipelines import cache, schemas
 from pipelines.common import (
     CONF_DIR,
     REPO_ROOT,
@@ -95,21 +95,24 @@ def path_overrides(pipeline: Mapping[str, Any]) -> list[str]:
 
 
 def stage_overrides(name: str, pipeline: Mapping[str, Any]) -> list[str]:
-    return [*path_overrides(pipeline),
-            *list((pipeline.get("overrides") or {}).get(name) or [])]
+    """The pipeline's paths, then ``overrides.<name>`` (``pipeline``: the pipeline config with
+    its defaults, composed or through :func:`schemas.with_defaults`)."""
+    return [*path_overrides(pipeline), *list(pipeline["overrides"][name])]
 
 
 def _identified(plan: Any, pipeline: Mapping[str, Any]) -> str:
     """The excitation the models of this pipeline identify on: the first configured one, or,
     when the data has none of those, the first the identification rule added."""
-    configured = list(pipeline.get("fit_excitations") or ["sine_decay"])
+    configured = list(pipeline["fit_excitations"])
     added = [k for k in plan.fit_excitations if k not in configured]
     present = set(plan.dataset["excitation"].astype(str))
     return str(configured[0] if configured[0] in present or not added else added[0])
 
 
 def stage_config(name: str, pipeline: Mapping[str, Any]) -> dict[str, Any]:
-    """``conf/<name>.yaml`` + ``overrides.<name>`` + the pipeline's shared values."""
+    """``conf/<name>.yaml`` + ``overrides.<name>`` + the pipeline's shared values
+    (:class:`pipelines.schemas.PipelineConfig`)."""
+    pipeline = schemas.with_defaults(schemas.PipelineConfig, pipeline)
     cfg = compose_stage(name, stage_overrides(name, pipeline))
     cfg["paths"] = dict(pipeline["paths"])
     cfg["tracking"] = dict(pipeline.get("tracking") or {})
@@ -117,29 +120,29 @@ def stage_config(name: str, pipeline: Mapping[str, Any]) -> dict[str, Any]:
               "n_jobs", "cache")
     if name in ("fit", "validate"):
         for key in shared:
-            if key in pipeline:
-                cfg[key] = pipeline[key]
+            cfg[key] = pipeline[key]
     if name == "validate":
         for key in ("heldout", "cross"):
-            if key in pipeline:
-                cfg[key] = pipeline[key]
+            cfg[key] = pipeline[key]
     # what the identification rule decided (run_pipeline sets it from the fit stage's plan)
-    identified = pipeline.get("identified_excitation") or \
-        list(pipeline.get("fit_excitations") or ["sine_decay"])[0]
+    identified = pipeline.get("identified_excitation") or next(iter(pipeline["fit_excitations"]),
+                                                                None)
+    if identified is None:
+        raise PipelineError("fit_excitations is empty and no identification run was found; "
+                            "name the excitation that identifies, e.g. "
+                            "fit_excitations=[sine_decay]")
     if name == "unseen_shape":
         cfg["fit_excitation"] = identified
         for key in ("config", "signals", "n_jobs", "cache"):
-            if key in pipeline:
-                cfg[key] = pipeline[key]
-        heldout = pipeline.get("planned_heldout") or pipeline.get("heldout")
+            cfg[key] = pipeline[key]
+        heldout = pipeline.get("planned_heldout") or pipeline["heldout"]
         if heldout:
             cfg["eval_excitations"] = list(heldout)
     if name == "report":
         cfg["fit_excitation"] = identified
         for key in ("n_jobs", "cache"):
-            if key in pipeline:
-                cfg[key] = pipeline[key]
-    cfg["progress"] = bool(pipeline.get("progress", True))
+            cfg[key] = pipeline[key]
+    cfg["progress"] = bool(pipeline["progress"])
     return cfg
 
 
@@ -194,13 +197,15 @@ def run_ingest_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
-    """Hydra-free core of ``make pipeline`` (cfg = composed ``conf/pipeline.yaml``)."""
+    """Hydra-free core of ``make pipeline`` (cfg = composed ``conf/pipeline.yaml``, or a
+    mapping whose missing settings take :class:`pipelines.schemas.PipelineConfig`'s defaults)."""
     from pipelines import fit, report, tracking, unseen_shape, validate
 
+    cfg = schemas.with_defaults(schemas.PipelineConfig, cfg)
     paths = Paths.from_config(cfg["paths"])
     paths.root.mkdir(parents=True, exist_ok=True)
     result = PipelineResult()
-    wanted = list(cfg.get("stages") or [*EXTERNAL_STAGES, *OWN_STAGES])
+    wanted = list(cfg["stages"])
     unknown = [s for s in wanted if s not in (*EXTERNAL_STAGES, *OWN_STAGES)]
     if unknown:
         raise PipelineError(f"unknown stage(s) {unknown}; known: "
@@ -338,7 +343,7 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
         ids = tracking.log_model_runs(
             tracker, parent, fits=fits, metrics=metrics, base_params=base, tags=tags,
             hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, plots=None,
-            stage="pipeline", progress=bool(cfg.get("progress", True)),
+            stage="pipeline", progress=bool(cfg["progress"]),
         )
         from pipelines import lineage
 

@@ -1,13 +1,16 @@
 """Typed configuration nodes (Hydra structured configs).
 
-The own settings of each pipeline stage (:data:`STAGE_SCHEMAS`) are a dataclass here, so
+The own settings of each pipeline stage, of the discrepancy stage and study, and of the
+whole-pipeline entry point ``run_all`` (:data:`STAGE_SCHEMAS`) are a dataclass here, so
 their defaults and types are written once: ``conf/<stage>.yaml`` puts the stage's schema first
 in its defaults list (``- fit_schema``) and holds only interpolations (``out: ${paths.raw}``)
 and the config groups, and a misspelt or mistyped override (``n_jobz=1``, ``n_jobs=two``)
 fails when the config is composed instead of being ignored. A setting whose meaning lives in
 a dataclass of the library is typed as that dataclass (``sync``:
 :class:`rig_io.synchronise.SyncOptions`, the discrepancy workflow's knobs:
-:class:`WorkflowSettings`).
+:class:`WorkflowSettings`). A free mapping (``auto_families``, the study's ``strengths``) is a
+``dict[str, Any]`` field: its keys are the user's, and a value given for it replaces the
+default mapping whole (:func:`with_defaults`).
 
 Config groups (``paths``, ``tracking``, ``family``, ``rig``, ``campaign``, ...) stay groups:
 their fields are typed ``Any``. A stage's Hydra-free ``run(cfg)`` passes its plain config
@@ -232,7 +235,183 @@ class ReportConfig(TrackedStageConfig):
     formats: list[str] = field(default_factory=lambda: ["md", "html"])
 
 
-#: Stage name -> its schema, stored as ``<stage>_schema`` (first in ``conf/<stage>.yaml``).
+@dataclass
+class DiscrepancyConfig:
+    """``conf/discrepancy.yaml``: what is the model missing? The source is ingested into a
+    temporary folder, the base family is fitted per configuration on the identification
+    excitation and judged on the held-out ones; locate -> name -> add -> show repeats until no
+    candidate beats the noise (docs/discrepancy.md)."""
+
+    paths: Any = MISSING
+    #: Group conf/tracking/ (MLflow).
+    tracking: Any = MISSING
+    #: Group conf/importer/: a foreign-log mapping; null = tsm-rig-log/1 runs and bags.
+    importer: Any = None
+    #: Raw runs or bags (``${paths.raw}``): a folder of runs, or one run folder or bag.
+    source: str = MISSING
+    #: The report JSON (``${paths.reports}/discrepancy.json``), written atomically; its plots
+    #: go beside it (``<report stem>_plots/``).
+    report: str = MISSING
+    #: Base family: a registered family name (gamma, preisach, bouc_wen, coleman_hodgdon,
+    #: linear), a local one (play_sum, affine), or ``auto`` = the family of ``auto_families``
+    #: with the lowest held-out RMSE on this source (the best standard family). As a base,
+    #: gamma is the thesis' physical form (sum-to-one, no offset, zero start, widest play 1/6
+    #: of the input's range) so it cannot absorb the effects searched for; base_params
+    #: override it.
+    base_family: str = "auto"
+    #: Parameters of the base family (``'+base_params={constraint: free, fit_offset: true}'``;
+    #: hysteresis.discrepancy.workflow.BASE_DEFAULTS).
+    base_params: dict[str, Any] = field(default_factory=dict)
+    #: The families ``auto`` ranks (and a given base is checked against): label -> parameters
+    #: (``family:`` names the family when the label does not).
+    auto_families: dict[str, Any] = field(default_factory=lambda: {
+        "gamma": {},
+        "gamma_free": {"family": "gamma", "constraint": "free", "fit_offset": True},
+        "preisach": {},
+        "bouc_wen": {},
+        "coleman_hodgdon": {},
+    })
+    #: auto: the workflow runs on the best plain family and, while its answer is neither clean
+    #: nor explained to within base_retry_factor x the noise floor, on the next best (up to
+    #: max_bases); the base whose model with its terms predicts the held-out runs best is kept
+    #: (a later one must beat the first by workflow.min_relative_gain). The report's
+    #: bases_tried lists them.
+    max_bases: int = 2
+    base_retry_factor: float = 1.5
+    #: With a base family given (not auto): also score the auto_families and flag the base
+    #: when its held-out RMSE is more than base_misfit_factor x the best one's (report:
+    #: base_misfit; the headline says so): the effects named may then stand in for the base's
+    #: misfit.
+    base_check: bool = True
+    base_misfit_factor: float = 1.5
+    #: Excitation kinds used for identification when a run's manifest does not say its role
+    #: (``excitation.role``); every other run is held out.
+    identify_excitations: list[str] = field(default_factory=lambda: ["sine_decay"])
+    #: A configuration recorded in one run only: its head identifies and this last fraction of
+    #: it is held out (the report's run_choice says so). Configurations with several runs use
+    #: roles.
+    single_run_heldout_fraction: float = 0.3
+    signals: Signals = field(default_factory=Signals)
+    #: Analyse at this rate (moving-average decimation; null = the dataset's own rate).
+    analysis_rate_hz: float | None = 25.0
+    #: The workflow's knobs: :class:`WorkflowSettings` holds their defaults and what each
+    #: means. The main ones: candidates, max_effects, min_relative_gain (a term must remove
+    #: this fraction of the held-out RMSE), max_delta_bic, min_runs_improved, noise_factor
+    #: (stop this close to the noise floor), physical_evidence (friction candidates must show
+    #: in the load cells), pair_search and pair_pool (when no single term clears the bar,
+    #: pairs with a member among the best pair_pool singles), joint_retune, clean_factor
+    #: (no_missing_effect only within this multiple of the noise floor; beyond it,
+    #: unexplained). Override as ``workflow.<knob>=<value>``; its ``progress`` follows the
+    #: stage's.
+    workflow: WorkflowSettings = field(default_factory=WorkflowSettings)
+    #: Seed 000 evidence: fit Coleman-Hodgdon + the active-modelling UKF on each
+    #: identification record and regress its model-error estimate f_h on the winning term
+    #: (SINDy-style).
+    ukf_evidence: bool = False
+    #: Before/after plots beside the report.
+    plots: bool = True
+    progress: bool = True
+
+
+@dataclass
+class DiscrepancyStudyConfig:
+    """``conf/discrepancy_study.yaml``: detection limits of the discrepancy workflow. Each case
+    hides one effect at one strength in virtual-rig runs of a configuration pair (seed 001's
+    excitations; the sine identifies, triangle and trapezoid are held out) and records what the
+    workflow names and how much held-out error it removes."""
+
+    paths: Any = MISSING
+    #: Group conf/tracking/ (MLflow).
+    tracking: Any = MISSING
+    #: Path stem of the outputs (``${paths.reports}/discrepancy_study``): <out>.json (every
+    #: case) and <out>.md (the table).
+    out: str = MISSING
+    #: Effects to study (null = every effect under ``strengths``).
+    effects_selected: list[str] | None = None
+    #: Strengths per effect (1 = the rig's nominal size, docs/virtual-rig.md).
+    strengths: dict[str, Any] = field(default_factory=lambda: {
+        "rate_dependence": [0.5, 1.0, 1.5, 2.0],
+        "tendon_elongation": [1.0, 2.0, 4.0, 8.0, 12.0],
+        "time_delay": [0.5, 1.0, 2.0],
+        "drift": [0.5, 1.0, 2.0],
+        "asymmetry": [0.5, 1.0, 2.0],
+        "saturation": [0.5, 1.0, 2.0],
+        "dead_zone": [0.5, 1.0, 2.0],
+    })
+    #: Configuration pairs [curve_angle_deg, radius_mm]. ``a`` is the pair the workflow was
+    #: built on; ``b`` and ``c`` were first looked at in this study; ``d`` (tight radius) and
+    #: ``e`` (one wrap, two radii) are the high-tension pairs. More: ``'+pairs.f=[[60,30],
+    #: [60,75]]'``.
+    pairs: dict[str, Any] = field(default_factory=lambda: {
+        "a": [[90, 30], [45, 60]],
+        "b": [[60, 45], [30, 75]],
+        "c": [[75, 30], [15, 60]],
+        "d": [[90, 30], [75, 30]],
+        "e": [[90, 45], [90, 60]],
+    })
+    #: The pairs studied (null or empty = every pair in ``pairs``).
+    pairs_selected: list[str] | None = field(
+        default_factory=lambda: ["a", "b", "c", "d", "e"])
+    #: Two effects at once: every pair of the effects under ``strengths`` (one strength each,
+    #: where each alone is named first) on the configuration pairs of its own
+    #: ``pairs_selected``. Empty strengths = skip.
+    combinations: dict[str, Any] = field(default_factory=lambda: {
+        "strengths": {
+            "rate_dependence": 1.0,
+            "tendon_elongation": 8.0,
+            "time_delay": 1.0,
+            "drift": 2.0,
+            "asymmetry": 2.0,
+            "saturation": 1.0,
+            "dead_zone": 1.0,
+        },
+        "pairs_selected": ["a"],
+    })
+    #: Seed of the virtual rig's runs.
+    seed: int = 3
+    #: The runs are analysed at this rate (Hz; moving-average decimation).
+    rate_hz: float = 20.0
+    base_family: str = "gamma"
+    #: Workflow settings (:class:`WorkflowSettings` fields, added with ``+``:
+    #: ``+workflow.physical_evidence=false`` judges on the output fit alone, no load-cell
+    #: evidence); empty = its defaults. An unknown knob stops the study before any case runs.
+    workflow: dict[str, Any] = field(default_factory=dict)
+    #: Parallel worker processes (joblib).
+    n_jobs: int = 2
+    progress: bool = True
+
+
+@dataclass
+class StageOverrides:
+    """Extra Hydra overrides per stage of ``run_all`` (lists of "key=value"), e.g.
+    ``"overrides.fit=['+family_overrides.bouc_wen.n_starts=2']"`` (each element quoted)."""
+
+    generate: list[str] = field(default_factory=list)
+    ingest: list[str] = field(default_factory=list)
+    fit: list[str] = field(default_factory=list)
+    validate: list[str] = field(default_factory=list)
+    unseen_shape: list[str] = field(default_factory=list)
+    report: list[str] = field(default_factory=list)
+
+
+@dataclass
+class PipelineConfig(ValidateConfig):
+    """``conf/pipeline.yaml`` (``make pipeline`` = ``python -m pipelines.run_all``): generate ->
+    ingest -> fit -> validate -> unseen_shape -> report under one MLflow parent run.
+
+    The settings it shares with the stages are validate's (:class:`ValidateConfig`, the same
+    defaults): ``run_all.stage_config`` forwards config, fit_excitations, fit_runs,
+    single_run_heldout_fraction, signals, n_jobs and cache to fit and validate, heldout and
+    cross to validate, config, signals, n_jobs, cache and the held-out kinds to unseen_shape,
+    n_jobs and cache to report, progress to every stage."""
+
+    #: The stages run, in this order (any subset of the default).
+    stages: list[str] = field(default_factory=lambda: [
+        "generate", "ingest", "fit", "validate", "unseen_shape", "report"])
+    overrides: StageOverrides = field(default_factory=StageOverrides)
+
+
+#: Config name -> its schema, stored as ``<name>_schema`` (first in ``conf/<name>.yaml``).
 STAGE_SCHEMAS: dict[str, type[Any]] = {
     "generate": GenerateConfig,
     "ingest": IngestConfig,
@@ -240,6 +419,9 @@ STAGE_SCHEMAS: dict[str, type[Any]] = {
     "validate": ValidateConfig,
     "unseen_shape": UnseenShapeConfig,
     "report": ReportConfig,
+    "discrepancy": DiscrepancyConfig,
+    "discrepancy_study": DiscrepancyStudyConfig,
+    "pipeline": PipelineConfig,
 }
 
 
@@ -267,16 +449,36 @@ def with_defaults(schema: type[Any], cfg: Mapping[str, Any]) -> dict[str, Any]:
     What a stage's Hydra-free ``run`` works on: a composed config comes back unchanged, a
     hand-written one (tests, ``run_all``) gets every setting it leaves out. Keys the schema
     does not know are kept, so one plain config may serve several stages; group nodes left
-    unset (``paths`` ...) are left out. A mistyped value raises
-    :class:`omegaconf.errors.ValidationError` (a ``ValueError``) naming the key.
+    unset (``paths`` ...) are left out. A typed node merges field by field
+    (``{"plots": {"dpi": 30}}`` keeps the other plot settings); a free mapping given
+    (``auto_families``, ``combinations``) replaces its default whole, as the value it is.
+    A mistyped value raises :class:`omegaconf.errors.ValidationError` (a ``ValueError``)
+    naming the key.
     """
     node = schema_node(schema)
     OmegaConf.set_struct(node, False)
+    _clear_given_mappings(node, cfg)
     node.merge_with(dict(cfg))
     unset = {str(k) for k in node if OmegaConf.is_missing(node, str(k))}
     plain = OmegaConf.to_container(node, resolve=True)
     assert isinstance(plain, dict)
     return {str(k): v for k, v in plain.items() if str(k) not in unset}
+
+
+def _clear_given_mappings(node: DictConfig, cfg: Mapping[str, Any]) -> None:
+    """Empty each free mapping (a ``dict[str, Any]`` field) of ``node`` that ``cfg`` gives,
+    so the merge puts the given mapping in its place instead of adding its keys to the
+    default's; typed nodes are searched for them."""
+    for key, value in cfg.items():
+        if not isinstance(key, str) or key not in node or not isinstance(value, Mapping):
+            continue
+        child = node._get_node(key)
+        if not isinstance(child, DictConfig) or child._is_none() or child._is_missing():
+            continue
+        if child._metadata.object_type in (None, dict):
+            node[key] = {}
+        else:
+            _clear_given_mappings(child, value)
 
 
 def register() -> None:

@@ -10,7 +10,7 @@ from omegaconf import OmegaConf
 
 from pipelines import fit as fit_stage
 from pipelines.common import CONF_DIR, Paths, to_container
-from pipelines.run_all import stage_config
+from pipelines.run_all import EXTERNAL_STAGES, OWN_STAGES, stage_config
 
 STAGES = ("fit", "validate", "report", "pipeline")
 
@@ -127,22 +127,26 @@ BAD_OVERRIDES = {
     "validate": ("held_out=[triangle_decay]", "cross=sometimes"),
     "unseen_shape": ("estimator.methd=rbf", "dpi=high"),
     "report": ("plots.max_point=500", "plots.dpi=[72]"),
+    "discrepancy": ("max_base=3", "base_check=sometimes"),
+    "discrepancy_study": ("pairs_selectd=[a]", "seed=three"),
+    "pipeline": ("stage=[fit]", "overrides.fit=families"),
 }
 
 
 def _schema_defaults(stage: str) -> dict[str, object]:
-    """The stage schema's own settings with their dataclass defaults (groups left out)."""
-    from dataclasses import asdict, fields
+    """The stage schema's own settings with their dataclass defaults (groups left out), as
+    plain values (a tuple default, WorkflowSettings.candidates, as the list a config holds)."""
+    from dataclasses import fields
 
-    from omegaconf import MISSING
-
-    from pipelines.schemas import STAGE_SCHEMAS
+    from pipelines.schemas import STAGE_SCHEMAS, schema_node
 
     schema = STAGE_SCHEMAS[stage]
     groups = {"paths", "tracking", "rig", "campaign", "effects", "importer", "family"}
-    values = asdict(schema())
+    node = schema_node(schema)
+    values = OmegaConf.to_container(node)
+    assert isinstance(values, dict)
     return {f.name: values[f.name] for f in fields(schema)
-            if f.name not in groups and values[f.name] != MISSING}
+            if f.name not in groups and not OmegaConf.is_missing(node, f.name)}
 
 
 def test_every_stage_has_a_schema() -> None:
@@ -230,3 +234,100 @@ def test_pipeline_experiments_compose_every_stage(experiment: str, tmp_path: Pat
     if experiment == "bending_joint":
         generate = compose_stage("generate", stage_overrides("generate", pipeline))
         assert generate["effects"]["time_delay"] == 12.0
+
+
+#: The discrepancy stage, its study and the whole pipeline: config name -> (schema, settings
+#: the composed config holds besides the groups, a mistyped value for a hand-written config).
+ENTRY_POINTS = {
+    "discrepancy": ("DiscrepancyConfig", {"max_bases": 2, "analysis_rate_hz": 25.0},
+                    {"base_misfit_factor": "large"}),
+    "discrepancy_study": ("DiscrepancyStudyConfig", {"seed": 3, "rate_hz": 20.0},
+                          {"n_jobs": "two"}),
+    "pipeline": ("PipelineConfig", {"n_jobs": 2, "stages": [*EXTERNAL_STAGES, *OWN_STAGES]},
+                 {"overrides": {"fit": "families=[linear]"}}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(ENTRY_POINTS))
+def test_entry_point_config_validates_against_its_schema(name: str) -> None:
+    from omegaconf.errors import ValidationError
+
+    from pipelines import schemas
+
+    schema = getattr(schemas, ENTRY_POINTS[name][0])
+    assert schemas.STAGE_SCHEMAS[name] is schema
+    cfg = _compose(name, ["paths.root=/tmp/somewhere"])
+    # the composed config is the schema's node: merging it into the schema (struct: an unknown
+    # key would fail) changes nothing, and a plain copy through with_defaults comes back equal
+    typed = OmegaConf.merge(schemas.schema_node(schema), cfg)
+    assert OmegaConf.to_container(typed, resolve=True) == to_container(cfg)
+    plain = to_container(cfg)
+    assert schemas.with_defaults(schema, plain) == plain
+    settings, mistyped = ENTRY_POINTS[name][1], ENTRY_POINTS[name][2]
+    assert {k: plain[k] for k in settings} == settings
+    with pytest.raises(ValidationError, match=next(iter(mistyped))):
+        schemas.with_defaults(schema, mistyped)
+
+
+@pytest.mark.parametrize(("name", "bad"), [
+    ("discrepancy", "auto_familes.gamma={}"), ("discrepancy", "workflow.pair_pool=[3]"),
+    ("discrepancy", "analysis_rate_hz=fast"), ("discrepancy", "identify_excitations=sine"),
+    ("discrepancy_study", "combinations.pair_selected=[b]"),
+    ("discrepancy_study", "effects_selected=drift"),
+    ("pipeline", "overrides.fitt=[]"), ("pipeline", "signals.inputs=x"),
+    ("pipeline", "cross=sometimes"), ("pipeline", "config.radius=30"),
+])
+def test_entry_point_rejects_a_misspelt_or_mistyped_override(name: str, bad: str) -> None:
+    from hydra.errors import ConfigCompositionException
+
+    with pytest.raises(ConfigCompositionException):
+        _compose(name, [bad])
+
+
+def test_entry_point_overrides_reach_their_settings() -> None:
+    disc = to_container(_compose("discrepancy", [
+        "base_family=gamma", "+base_params={constraint: free, fit_offset: true}",
+        "analysis_rate_hz=null", "workflow.max_effects=2"]))
+    assert disc["base_params"] == {"constraint": "free", "fit_offset": True}
+    assert disc["analysis_rate_hz"] is None and disc["workflow"]["max_effects"] == 2
+    study = to_container(_compose("discrepancy_study", [
+        "effects_selected=[drift]", "strengths.drift=[1,2]", "+pairs.f=[[60,30],[60,75]]",
+        "pairs_selected=[f]", "+workflow.physical_evidence=false"]))
+    assert study["effects_selected"] == ["drift"] and study["strengths"]["drift"] == [1, 2]
+    assert study["pairs"]["f"] == [[60, 30], [60, 75]] and study["pairs_selected"] == ["f"]
+    assert study["workflow"] == {"physical_evidence": False}
+    pipeline = to_container(_compose("pipeline", ["stages=[fit,validate]", "n_jobs=1"]))
+    assert pipeline["stages"] == ["fit", "validate"] and pipeline["n_jobs"] == 1
+
+
+def test_a_hand_written_mapping_replaces_the_default_mapping_whole() -> None:
+    from pipelines.schemas import DiscrepancyConfig, DiscrepancyStudyConfig, with_defaults
+
+    study = with_defaults(DiscrepancyStudyConfig, {"combinations": {},
+                                                   "strengths": {"drift": [1.0]}})
+    assert study["combinations"] == {} and study["strengths"] == {"drift": [1.0]}
+    assert study["pairs_selected"] == ["a", "b", "c", "d", "e"] and study["workflow"] == {}
+    disc = with_defaults(DiscrepancyConfig, {"auto_families": {"gamma": {}},
+                                             "signals": {"input": "u"},
+                                             "workflow": {"max_effects": 2}})
+    assert disc["auto_families"] == {"gamma": {}}
+    # typed nodes still merge field by field
+    assert disc["signals"] == {"input": "u", "output": "output"}
+    assert disc["workflow"]["max_effects"] == 2 and disc["workflow"]["noise_factor"] == 2.0
+    assert disc["importer"] is None and "source" not in disc  # a required value left unset
+
+
+def test_a_hand_written_pipeline_config_forwards_the_schema_defaults(tmp_path: Path) -> None:
+    from pipelines.schemas import ValidateConfig
+
+    composed = to_container(_compose("pipeline", [f"paths.root={tmp_path}", "tracking=off"]))
+    pipeline = {"paths": composed["paths"], "tracking": composed["tracking"],
+                "overrides": {"fit": ["families=[linear]"]}}
+    fit_cfg = stage_config("fit", pipeline)
+    assert fit_cfg["families"] == ["linear"]
+    assert fit_cfg["fit_excitations"] == ValidateConfig().fit_excitations
+    val_cfg = stage_config("validate", pipeline)
+    assert val_cfg["heldout"] == ValidateConfig().heldout and val_cfg["cross"] is False
+    unseen = stage_config("unseen_shape", pipeline)
+    assert unseen["fit_excitation"] == "sine_decay"
+    assert unseen["eval_excitations"] == ValidateConfig().heldout
