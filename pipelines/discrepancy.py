@@ -456,9 +456,19 @@ def headline(report: Mapping[str, Any]) -> str:
                  f"worse held out than {misfit['best_family']}, so what is named may be the "
                  "base's misfit (base_family=auto picks the best)")
     if not report["effects"]:
+        ratio = float(report["residual"]["rmse_over_noise"])
+        rmse = f"held-out RMSE {report['summary']['heldout_rmse_before']:.4g}, {ratio:.1f}x " \
+               "the noise floor"
+        reach = report.get("within_base_reach") or []
+        absorbed = (f"; within the base's reach (it absorbs them, so these runs cannot tell "
+                    f"them apart from it): {', '.join(reach)}") if reach else ""
+        if report["verdict"] == "unexplained":
+            tried_terms = ", ".join(s["name"] for s in (report.get("rankings") or [[]])[0])
+            return (f"unexplained: the base {report['base_family']} leaves a residual no "
+                    f"candidate term reduces ({rmse}; tried: {tried_terms or 'none'}); see the "
+                    f"located segments{absorbed}{also}")
         return (f"no missing effect: no candidate term beats the noise on the held-out runs "
-                f"(base {report['base_family']}, held-out RMSE "
-                f"{report['summary']['heldout_rmse_before']:.4g}){also}")
+                f"(base {report['base_family']}, {rmse}){absorbed}{also}")
     parts = []
     for e in report["effects"]:
         cut = 1.0 - e["heldout_rmse_after"] / e["heldout_rmse_before"]

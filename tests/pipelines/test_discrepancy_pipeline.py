@@ -131,4 +131,14 @@ def test_headline_names_what_the_load_cells_show_but_the_model_already_reproduce
     assert line.endswith("the load cells also show dead_zone, already reproduced by the model "
                          "(named, not added)")
     rep["effects"], rep["measured_within_reach"] = [], []
-    assert headline(rep).startswith("no missing effect") and "load cells" not in headline(rep)
+    rep.update(verdict="no_missing_effect", residual={"rmse_over_noise": 1.2},
+               within_base_reach=["dead_zone"])
+    clean = headline(rep)
+    assert clean.startswith("no missing effect") and "load cells" not in clean
+    assert "1.2x the noise floor" in clean and "within the base's reach" in clean
+    # a residual no term reduces, far above the noise, is never called clean
+    rep.update(verdict="unexplained", residual={"rmse_over_noise": 9.0},
+               rankings=[[{"name": "drift"}, {"name": "time_delay"}]])
+    line = headline(rep)
+    assert line.startswith("unexplained") and "9.0x the noise floor" in line
+    assert "tried: drift, time_delay" in line and "no missing effect" not in line
