@@ -67,10 +67,11 @@ STRENGTHS = (1.0, 2.0)
 
 
 def injector_cases() -> dict[str, dict[str, float]]:
-    """Case name -> injected effects: clean, every effect at each of :data:`STRENGTHS`."""
+    """Case name -> injected effects: clean (two noise seeds: ``#1`` names the seed), every
+    effect at each of :data:`STRENGTHS`."""
     from hysteresis.discrepancy.inject import INJECTED
 
-    cases: dict[str, dict[str, float]] = {"clean": {}}
+    cases: dict[str, dict[str, float]] = {"clean": {}, "clean#1": {}}
     for s in STRENGTHS:
         cases.update({f"{name}@{s:g}": {name: s} for name in INJECTED})
     return cases
@@ -96,7 +97,8 @@ def injector_sources(cases: dict[str, dict[str, float]] | None = None) -> dict[s
     out: dict[str, Any] = {}
     for case, effects in (cases or injector_cases()).items():
         for plant in PLANTS:
-            runs = injected_runs(plant, effects)
+            runs = injected_runs(plant, effects,
+                                 seed=int(case.split("#")[1]) if "#" in case else 0)
             t0 = time.perf_counter()
             rep, _ = analyse(runs, auto_families=dict(cfg["auto_families"]),
                              max_bases=int(cfg["max_bases"]),
@@ -113,8 +115,8 @@ def injector_sources(cases: dict[str, dict[str, float]] | None = None) -> dict[s
                 "hit": (not named) if hidden is None
                 else bool(named and named[0] == hidden and cut >= 0.5)}
     rows = list(out.values())
-    effect_rows = [v for k, v in out.items() if not k.endswith(":clean")]
-    clean_rows = [v for k, v in out.items() if k.endswith(":clean")]
+    effect_rows = [v for k, v in out.items() if ":clean" not in k]
+    clean_rows = [v for k, v in out.items() if ":clean" in k]
     out["_summary"] = {
         "sources": len(rows), "max_seconds": max(v["seconds"] for v in rows),
         "over_60_s": sum(v["seconds"] > 60 for v in rows),
@@ -122,6 +124,60 @@ def injector_sources(cases: dict[str, dict[str, float]] | None = None) -> dict[s
         "effect_sources": len(effect_rows),
         "false_effects_on_clean": sum(not v["hit"] for v in clean_rows),
         "clean_sources": len(clean_rows)}
+    return out
+
+
+#: The bases a verdict must not depend on (issue 18): every auto family, given explicitly.
+BASES = ("gamma", "gamma_free", "preisach", "bouc_wen", "coleman_hodgdon")
+
+
+def base_independence(cases: dict[str, dict[str, float]] | None = None) -> dict[str, Any]:
+    """Per injector source, the first effect named (or none) with each of :data:`BASES` given
+    explicitly and with ``auto``; the summary counts the sources on which every base agrees
+    with auto, and each base's agreement. Default cases: clean and every effect at strength 1.
+
+    ``python -m bench.bench_discrepancy --bases`` runs it alone (about 25 min on 2 cores)."""
+    from hydra import compose, initialize_config_dir
+
+    from hysteresis.discrepancy.inject import PLANTS, injected_runs
+    from pipelines.common import CONF_DIR, to_container
+    from pipelines.discrepancy import analyse
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = to_container(compose("discrepancy"))
+    families = dict(cfg["auto_families"])
+    if cases is None:
+        cases = {k: v for k, v in injector_cases().items()
+                 if k == "clean" or k.endswith("@1")}
+    out: dict[str, Any] = {}
+    for case, effects in cases.items():
+        for plant in PLANTS:
+            runs = injected_runs(plant, effects,
+                                 seed=int(case.split("#")[1]) if "#" in case else 0)
+            row: dict[str, Any] = {}
+            for base in ("auto", *BASES):
+                t0 = time.perf_counter()
+                if base == "auto":
+                    rep, _ = analyse(runs, auto_families=families,
+                                     max_bases=int(cfg["max_bases"]),
+                                     base_retry_factor=float(cfg["base_retry_factor"]))
+                else:
+                    params = {k: v for k, v in families[base].items() if k != "family"}
+                    rep, _ = analyse(runs, base_family=str(families[base].get("family", base)),
+                                     base_params=params, auto_families=families,
+                                     base_check=False)
+                named = [e["name"] for e in rep["effects"]]
+                row[base] = {"first": named[0] if named else None, "named": named,
+                             "verdict": rep["verdict"],
+                             "seconds": round(time.perf_counter() - t0, 1)}
+            row["all_agree"] = all(row[b]["first"] == row["auto"]["first"] for b in BASES)
+            out[f"{plant}:{case}"] = row
+    rows = list(out.values())
+    out["_summary"] = {
+        "sources": len(rows),
+        "all_bases_agree_with_auto": sum(r["all_agree"] for r in rows),
+        "agree_with_auto_by_base": {b: sum(r[b]["first"] == r["auto"]["first"] for r in rows)
+                                    for b in BASES}}
     return out
 
 
@@ -154,4 +210,9 @@ if __name__ == "__main__":
     import json
     import sys
 
-    print(json.dumps(injector_sources() if "--injector" in sys.argv else run(), indent=1))
+    if "--injector" in sys.argv:
+        print(json.dumps(injector_sources(), indent=1))
+    elif "--bases" in sys.argv:
+        print(json.dumps(base_independence(), indent=1))
+    else:
+        print(json.dumps(run(), indent=1))
