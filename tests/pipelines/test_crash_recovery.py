@@ -48,8 +48,10 @@ STAGES: dict[str, list[str]] = {
     "unseen_shape": ["pipelines.unseen_shape", "n_jobs=1"],
     # one run per configuration here: the workflow splits each in time
     "discrepancy": ["pipelines.discrepancy", "base_family=gamma", "progress=false"],
-    # the papers' compensation experiments (the smoke size), on the virtual rig
-    "compensate": ["pipelines.compensate", "experiment=compensation_quick", "plots=false"],
+    # the papers' compensation experiments (the smoke size, shorter profiles: what is killed
+    # and recovered is the stage's writing, not the length of its runs), on the virtual rig
+    "compensate": ["pipelines.compensate", "experiment=compensation_quick", "plots=false",
+                   "seed002.duration_s=4.0", "seed001.profiles={mixed:4.0,sine:4.0,triangle:3.0}"],
     # the champions' registration runs at the end of a pipeline that fitted and validated
     "registry": ["pipelines.run_all", "stages=[fit,validate]", "n_jobs=1",
                  "tracking.registry.enabled=true", 'overrides.fit=["families=[linear,gamma]"]'],
