@@ -42,6 +42,7 @@ from hysteresis.base import HysteresisError, as_1d, check_inverse_reach
 from hysteresis.coleman_hodgdon import ColemanHodgdonModel
 from hysteresis.gamma import GammaModel, GammaState
 from hysteresis.metrics import error_statistics
+from hysteresis.play import gamma_at
 from hysteresis.ukf import PAPER_P0, PAPER_Q0, PAPER_R0, ActiveModelUKF
 
 FloatArray = npt.NDArray[np.float64]
@@ -254,9 +255,13 @@ def _solver_step(model: GammaModel, target: float, state: GammaState, *, method:
     """Table 4.4's LSQ_Opt solvers on ``(Gamma(v | W_{k-1}) - target)^2`` from ``state.u``."""
     v_prev = float(state.u)
     lo, hi = bounds
+    # the compiled operator, not model.step: the table times the solvers, not model overhead
+    w, p, q = (np.ascontiguousarray(a, dtype=np.float64)
+               for a in (state.w, model.thresholds_, model.weights_))
+    offset = float(model.offset_)
 
     def cost(x: Any) -> float:
-        y, _ = model.step(float(np.asarray(x).ravel()[0]), state)
+        y = gamma_at(float(np.asarray(x).ravel()[0]), w, p, q, offset)
         return (y - target) ** 2
 
     if method == "bounded":
