@@ -572,7 +572,7 @@ def _reach_note(within: list[str], base_name: str) -> str:
 def _public(s: dict[str, Any]) -> dict[str, Any]:
     keys = ("name", "relative_gain", "delta_bic", "rmse_before", "rmse_after",
             "heldout_rmse_before", "heldout_rmse_after", "runs_improved", "residual_explained",
-            "load_cell_evidence")
+            "load_cell_evidence", "parameters")
     return {k: s[k] for k in keys}
 
 

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 from hydra import compose, initialize_config_dir
 
-from hysteresis.discrepancy.inject import injected_runs
+from hysteresis.discrepancy.inject import SIZES, injected_runs
 from hysteresis.discrepancy.workflow import base_factory_for, run_workflow
 from pipelines.common import CONF_DIR, to_container
 from pipelines.discrepancy import analyse, base_misfit, headline, pick_base
@@ -35,6 +35,11 @@ def test_a_base_that_fits_is_not_flagged(families: dict[str, Any]) -> None:
     runs = injected_runs("gamma", {"time_delay": 1.0})
     rep = run_workflow(runs, base_factory_for("gamma"), base_name="gamma")
     assert [e["name"] for e in rep["effects"]] == ["time_delay"]
+    # every candidate tried reports its fitted parameters; the latency's is the injected one
+    tried = {s["name"]: s["parameters"] for s in rep["rankings"][0]}
+    assert len(tried) == 7 and all(tried.values())
+    (delay,) = tried["time_delay"].values()
+    assert delay["theta"] == pytest.approx(SIZES["time_delay"], rel=0.1)
     assert base_misfit(runs, rep, families, factor=1.5) is None
     assert "caution" not in headline({**rep, "base_misfit": None})
 
