@@ -58,6 +58,8 @@ from hysteresis.compensation import (
     triangle_profile,
 )
 from hysteresis.shape_aware import ShapeAwareModel
+from pipelines import schemas
+from pipelines.common import to_container
 from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -116,19 +118,6 @@ def drive(rig: Any, command: Any) -> Recorder:
 # ---------------------------------------------------------------------------------------------
 # Small helpers
 # ---------------------------------------------------------------------------------------------
-def _cfg_dict(node: Any) -> dict[str, Any]:
-    try:
-        from omegaconf import DictConfig, OmegaConf
-
-        if isinstance(node, DictConfig):
-            out = OmegaConf.to_container(node, resolve=True)
-            assert isinstance(out, dict)
-            return {str(k): v for k, v in out.items()}
-    except ImportError:  # pragma: no cover
-        pass
-    return dict(node or {})
-
-
 def with_lead_in(yd: np.ndarray, *, start: float, lead_s: float) -> np.ndarray:
     """Prepend a smooth move from the rig's rest value ``start`` to ``yd[0]`` over ``lead_s``
     (the papers' motions start away from rest; statistics skip this lead-in)."""
@@ -164,7 +153,7 @@ def _registry_model(ours_cfg: Mapping[str, Any], rig: str, phi: float, r: float)
 
     name = registry.registered_name(rig, phi, r, prefix=str(ours_cfg["registry"]))
     return registry.load_champion(name, tracking_uri=str(ours_cfg["tracking_uri"]),
-                                  alias=str(ours_cfg.get("registry_alias", registry.ALIAS)))
+                                  alias=str(ours_cfg["registry_alias"]))
 
 
 def fit_reachable(name: str, u: np.ndarray, y: np.ndarray, params: Mapping[str, Any], *,
@@ -206,7 +195,7 @@ def fit_reachable(name: str, u: np.ndarray, y: np.ndarray, params: Mapping[str, 
 
 
 def _family_params(cfg: Mapping[str, Any], name: str) -> dict[str, Any]:
-    return dict((cfg.get("family_params") or {}).get(name) or {})
+    return dict(cfg["family_params"].get(name) or {})
 
 
 def _progress(items: list[Any], desc: str, enabled: bool) -> Iterable[Any]:
@@ -297,7 +286,7 @@ def _seed001_configs(cfg: Mapping[str, Any]) -> list[tuple[str, float, float, st
     for label, (phi, r) in dict(cfg["shapes"]).items():
         out.append((str(label), float(phi), float(r), "full"))
         seen.add((float(phi), float(r)))
-    mode = str(cfg.get("all_configurations", "none"))
+    mode = str(cfg["all_configurations"])
     if mode not in ("none", "quick", "full"):
         raise HysteresisError(f"seed001.all_configurations must be none|quick|full, got {mode!r}")
     if mode != "none":
@@ -315,26 +304,30 @@ def fit_shape_aware(cfg: Mapping[str, Any], backend: RigBackend, u_id_cmd: np.nd
 
     Each training configuration is driven with the identification excitation and fitted
     through :func:`fit_reachable`; returns the model and the labels it was trained on.
+    ``cfg`` is the whole ``seed001`` node (:class:`schemas.Seed001Settings`, as :func:`run`
+    passes it).
     """
     sa_cfg = dict(cfg["shape_aware"])
     held = {(float(phi), float(r)) for phi, r in dict(cfg["shapes"]).values()}
-    train = [(float(phi), float(r)) for phi in sa_cfg.get("curve_angles_deg",
-                                                          cfg["curve_angles_deg"])
-             for r in sa_cfg.get("radii_mm", cfg["radii_mm"])
+    angles = sa_cfg["curve_angles_deg"]
+    radii = sa_cfg["radii_mm"]
+    train = [(float(phi), float(r))
+             for phi in (cfg["curve_angles_deg"] if angles is None else angles)
+             for r in (cfg["radii_mm"] if radii is None else radii)
              if (float(phi), float(r)) not in held]
     models = []
     for phi, r in _progress(train, "seed001 shape-aware training", progress):
         rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=phi, radius_mm=r,
-                               effects=dict(cfg.get("effects") or {}) or None, seed=seed,
+                               effects=dict(cfg["effects"]) or None, seed=seed,
                                sensors=None)
         rec = drive(rig, u_id_cmd)
         model, _ = fit_reachable(str(sa_cfg["family"]), rec.column(str(cfg["model_input"])),
-                                 rec.column("output"), sa_cfg.get("params") or {},
+                                 rec.column("output"), sa_cfg["params"],
                                  label=f"seed001 shape-aware {phi:g}/{r:g}")
         models.append(model)
     sa = ShapeAwareModel(base_family=str(sa_cfg["family"]),
-                         family_params=dict(sa_cfg.get("params") or {}),
-                         **dict(sa_cfg.get("estimator") or {})).fit(train, models)
+                         family_params=dict(sa_cfg["params"]),
+                         **dict(sa_cfg["estimator"])).fit(train, models)
     return sa, [f"{phi:g}/{r:g}" for phi, r in train]
 
 
@@ -345,21 +338,21 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
     kind = ident.pop("kind")
     _, u_id_cmd = backend.make_excitation(kind, dt_s=DT_S, **ident)
     ours_cfg = dict(cfg["ours"])
-    timing_cfg = dict(cfg.get("timing") or {})
+    timing_cfg = dict(cfg["timing"])
     rows: list[dict[str, Any]] = []
     timing_rows: list[dict[str, Any]] = []
     fit_rows: list[dict[str, Any]] = []
     configs = _seed001_configs(cfg)
-    sa_cfg = dict(cfg.get("shape_aware") or {})
+    sa_cfg = dict(cfg["shape_aware"])
     shape_aware = None
-    if sa_cfg.get("enabled", False):
+    if sa_cfg["enabled"]:
         shape_aware, trained_on = fit_shape_aware(cfg, backend, u_id_cmd, seed=seed,
                                                   progress=progress)
         log.info("seed001: shape-aware %s trained on %d configurations (%s)",
                  sa_cfg["family"], len(trained_on), ", ".join(trained_on))
     for label, phi, r, depth in _progress(configs, "seed001 configurations", progress):
         rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=phi, radius_mm=r,
-                               effects=dict(cfg.get("effects") or {}) or None, seed=seed,
+                               effects=dict(cfg["effects"]) or None, seed=seed,
                                sensors=None)
         rec = drive(rig, u_id_cmd)
         u_id = rec.column(str(cfg["model_input"]))
@@ -377,11 +370,11 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
             fit_rows.append({"shape": label, "curve_angle_deg": phi, "radius_mm": r,
                              "family": fam, "fit_s": time.perf_counter() - t0,
                              "fit_rmse": float(np.sqrt(np.mean((pred - y_id) ** 2)))})
-        if ours_cfg.get("registry"):
+        if ours_cfg["registry"]:
             ours_model = _registry_model(ours_cfg, str(cfg["rig"]), phi, r)
         else:
             ours_model, _ = fit_reachable(str(ours_cfg["family"]), u_id, y_id,
-                                          ours_cfg.get("params") or {},
+                                          ours_cfg["params"],
                                           label=f"seed001 {label} ours")
         profiles = dict(cfg["profiles"])
         if depth == "quick":
@@ -428,7 +421,7 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
                 figs.figure(f"seed001_{label}_{prof}",
                            plot_runs(f"seed 001 shape {label} ({phi:g} deg, {r:g} mm) - {prof}",
                                      show))
-            if depth == "full" and timing_cfg.get("enabled", True):
+            if depth == "full" and timing_cfg["enabled"]:
                 paper = models.get(str(cfg["paper_family"]))
                 if paper is not None:
                     timing_rows.extend(_table44(paper, yd, timing_cfg, stroke, keys))
@@ -448,7 +441,7 @@ def run_seed001(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
 def _table44(model: Any, yd: np.ndarray, cfg: Mapping[str, Any], stroke: StrokeLimits,
              keys: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Per-step inversion time of Table 4.4's LSQ_Opt solvers and ours on the paper's Gamma."""
-    steps = dict(cfg.get("steps") or {})
+    steps = dict(cfg["steps"])
     v0 = 0.0
     rows = []
     for method in cfg["methods"]:
@@ -484,10 +477,10 @@ def run_seed002(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
     stroke = StrokeLimits(*map(float, cfg["stroke"]))
     tracker_key = str(cfg["tracker_key"])
     signals: dict[str, float | None] = {f"P({w:g})": float(w) for w in cfg["omegas"]}
-    if cfg.get("non_periodic", True):
+    if cfg["non_periodic"]:
         signals["N-P"] = None
     t = np.arange(0.0, float(cfg["duration_s"]), DT_S)
-    lead = float(cfg.get("lead_in_s", 0.0))
+    lead = float(cfg["lead_in_s"])
     rows: list[dict[str, Any]] = []
     cases = list(dict(cfg["cases"]).items())
     jobs = [(c, trial) for c in cases for trial in range(int(cfg["trials"]))]
@@ -496,13 +489,13 @@ def run_seed002(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
         cam = CameraModel(rate_hz=float(cam_cfg["rate_hz"]), latency_s=float(cam_cfg["latency_s"]),
                           noise_std=float(cam_cfg["noise_std"]), seed=rseed)
         rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=float(phi), radius_mm=float(r),
-                               effects=dict(cfg.get("effects") or {}) or None, seed=rseed,
-                               sensors=dict(cfg.get("sensors") or {}) or None)
+                               effects=dict(cfg["effects"]) or None, seed=rseed,
+                               sensors=dict(cfg["sensors"]) or None)
         rec = drive(rig, u_cal)
         y_cam = _camera_estimate(t_cal, rec.column(tracker_key), cam)
-        bw = _fit_family("bouc_wen", u_cal, y_cam, dict(cfg.get("bouc_wen_params") or {}))
+        bw = _fit_family("bouc_wen", u_cal, y_cam, dict(cfg["bouc_wen_params"]))
         ours_model, _ = fit_reachable(str(cfg["ours"]["family"]), u_cal, y_cam,
-                                      cfg["ours"].get("params") or {}, label=f"seed002 {case} ours")
+                                      cfg["ours"]["params"], label=f"seed002 {case} ours")
         rest = float(rig.reset().get(tracker_key, 0.0))
         for sig, omega in signals.items():
             yd = with_lead_in(seed002_motion(t, omega_rad_s=omega,
@@ -516,10 +509,10 @@ def run_seed002(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
                                       output_key=tracker_key),
                 "vision_feedback": run_vision_feedback(
                     fresh(rig), yd, camera=cam, gain=float(cfg["feedback"]["gain"]),
-                    kp=float(cfg["feedback"].get("kp", 0.0)), stroke=stroke,
+                    kp=float(cfg["feedback"]["kp"]), stroke=stroke,
                     output_key=tracker_key),
             }
-            u_bw = bw.invert(yd, method=str(cfg.get("bouc_wen_inverse", "feedforward")))
+            u_bw = bw.invert(yd, method=str(cfg["bouc_wen_inverse"]))
             runs["bouc_wen_ff"] = run_open_loop(fresh(rig), u_bw, desired=yd, stroke=stroke,
                                                 scheme="bouc_wen_ff", output_key=tracker_key)
             runs["ours"] = run_inverse_with_error_correction(
@@ -552,12 +545,12 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
                 progress: bool) -> dict[str, pd.DataFrame]:
     phi, r = map(float, cfg["configuration"])
     rig = backend.make_rig(rig=cfg["rig"], curve_angle_deg=phi, radius_mm=r,
-                           effects=dict(cfg.get("effects") or {}) or None, seed=seed,
-                           sensors=dict(cfg.get("sensors") or {}) or None)
+                           effects=dict(cfg["effects"]) or None, seed=seed,
+                           sensors=dict(cfg["sensors"]) or None)
     v = float(cfg["velocity_mm_s"])
     angle_key = str(cfg["angle_key"])
     cam_cfg = dict(cfg["camera"])
-    cam = CameraModel(rate_hz=cam_cfg.get("rate_hz"), latency_s=float(cam_cfg["latency_s"]),
+    cam = CameraModel(rate_hz=cam_cfg["rate_hz"], latency_s=float(cam_cfg["latency_s"]),
                       noise_std=float(cam_cfg["noise_std"]), seed=seed)
     segs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     full: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -591,13 +584,13 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
     # Tracking: PD vs AME-PD vs ours on alpha_d(t) = -50 cos(pi t / 50) + 80 (eq. 32).
     tr = dict(cfg["tracking"])
     t = np.arange(0.0, float(tr["duration_s"]), DT_S)
-    lead = float(tr.get("lead_in_s", 0.0))
+    lead = float(tr["lead_in_s"])
     rest = float(rig.reset().get(angle_key, 0.0))
     yd = with_lead_in(seed000_target(t), start=rest, lead_s=lead)
     stroke = StrokeLimits(*map(float, cfg["stroke"]))
     common = dict(dt_s=DT_S, kp=float(tr["kp"]), kd=float(tr["kd"]), stroke=stroke, camera=cam,
                   control_every=int(tr["control_every"]), output_key=angle_key,
-                  l0=float(tr.get("l0", 0.0)))
+                  l0=float(tr["l0"]))
     runs = {
         "pd": run_ame_pd(fresh(rig), yd, None, kc=0.0, **common),  # type: ignore[arg-type]
         "ame_pd": run_ame_pd(fresh(rig), yd, ref, kc=float(tr["kc"]), ukf_kw=ukf_kw,
@@ -606,11 +599,11 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
     # Ours: the Gamma operator identified on the widest segment's whole record (from rest).
     pull_id, angle_id = full[widest]
     ours_model, note = fit_reachable(str(cfg["ours"]["family"]), pull_id, angle_id,
-                                     cfg["ours"].get("params") or {}, label="seed000 ours")
+                                     cfg["ours"]["params"], label="seed000 ours")
     runs["ours"] = run_inverse_with_error_correction(
         fresh(rig), yd, ours_model, camera=cam, stroke=stroke, output_key=angle_key,
         process_var=float(cfg["ours"]["process_var"]), meas_var=float(cfg["ours"]["meas_var"]),
-        v0=float(tr.get("l0", 0.0)),
+        v0=float(tr["l0"]),
         identified_range=(float(np.min(pull_id)), float(np.max(pull_id))))
     track_rows = []
     for res in runs.values():
@@ -813,22 +806,22 @@ def write_report(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any], pat
 # ---------------------------------------------------------------------------------------------
 def run(cfg: Mapping[str, Any], *, backend: RigBackend | None = None) -> dict[str, pd.DataFrame]:
     """Run the enabled experiments, write tables/plots/report, log to MLflow; return the tables."""
-    cfgd = _cfg_dict(cfg)
+    cfgd = schemas.with_defaults(schemas.CompensateConfig, cfg)
     backend = backend or virtual_backend()
     out_dir = Path(str(cfgd["out_dir"]))
     clean_leftovers(out_dir)  # temporaries of a killed compensate
-    art = Artifacts(out_dir, plots=bool(cfgd.get("plots", True)))
+    art = Artifacts(out_dir, plots=bool(cfgd["plots"]))
     figs = Figures(plots=art.plots)
-    seed = int(cfgd.get("seed", 0))
-    progress = bool(cfgd.get("progress", True))
+    seed = int(cfgd["seed"])
+    progress = bool(cfgd["progress"])
     tables: dict[str, pd.DataFrame] = {}
     t0 = time.perf_counter()
     runners = (("seed001", run_seed001), ("seed002", run_seed002), ("seed000", run_seed000))
     for name, fn in runners:
-        sub = cfgd.get(name) or {}
-        if not sub.get("enabled", False):
+        sub = cfgd[name]
+        if not sub["enabled"]:
             continue
-        if (sub.get("ours") or {}).get("registry"):
+        if name == "seed001" and sub["ours"]["registry"]:  # only seed 001 takes registered models
             from pipelines.tracking import settings_from_config
 
             uri = settings_from_config(cfgd.get("tracking") or {},
@@ -877,7 +870,7 @@ def _main() -> None:
 
     @hydra.main(config_path="../conf", config_name="compensate", version_base="1.3")
     def main(cfg: DictConfig) -> None:
-        tables = run(cfg)
+        tables = run(to_container(cfg))
         for name, frame in tables.items():
             log.info("%s: %d rows", name, len(frame))
 

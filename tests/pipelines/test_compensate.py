@@ -179,11 +179,14 @@ def test_quick_seed000_ours_is_not_worse_than_pd_on_the_virtual_rig(tmp_path: Pa
 
 
 def test_shape_aware_model_is_trained_without_the_compensated_shapes() -> None:
+    from pipelines.schemas import Seed001Settings, with_defaults
+
     cfg = {"rig": "tsm-bench", "shapes": {"A": [90, 30], "B": [60, 60]},
            "curve_angles_deg": [30, 60, 90], "radii_mm": [30, 60], "model_input": "command",
            "shape_aware": {"family": "gamma", "params": {"constraint": "free",
                                                         "fit_offset": True, "max_threshold": 2.0},
                            "estimator": {"angle_degree": 2, "curvature_degree": 1}}}
+    cfg = with_defaults(Seed001Settings, cfg)  # the seed001 node run() passes
     _, u = stand_in_excitation("sine_decay", amplitudes_mm=[3.0, 1.5], periods_per_amplitude=2,
                                frequency_hz=0.5)
     sa, trained = compensate.fit_shape_aware(cfg, BACKEND, u, seed=0, progress=False)

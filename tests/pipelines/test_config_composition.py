@@ -129,6 +129,7 @@ BAD_OVERRIDES = {
     "report": ("plots.max_point=500", "plots.dpi=[72]"),
     "discrepancy": ("max_base=3", "base_check=sometimes"),
     "discrepancy_study": ("pairs_selectd=[a]", "seed=three"),
+    "compensate": ("seed001.profilez=8", "seed002.trials=two"),
     "pipeline": ("stage=[fit]", "overrides.fit=families"),
 }
 
@@ -234,6 +235,59 @@ def test_pipeline_experiments_compose_every_stage(experiment: str, tmp_path: Pat
     if experiment == "bending_joint":
         generate = compose_stage("generate", stage_overrides("generate", pipeline))
         assert generate["effects"]["time_delay"] == 12.0
+
+
+@pytest.mark.parametrize("experiment", ["compensation_default", "compensation_quick",
+                                        "compensation_full"])
+def test_compensation_experiments_compose_and_validate(experiment: str) -> None:
+    from hydra.errors import ConfigCompositionException
+
+    from pipelines import schemas
+
+    cfg = _compose("compensate", [f"experiment={experiment}", "paths.root=/tmp/somewhere"])
+    # the composed config is the schema's node: merging it into the schema (struct) changes
+    # nothing, and a plain copy through with_defaults comes back equal
+    typed = OmegaConf.merge(schemas.schema_node(schemas.CompensateConfig), cfg)
+    assert OmegaConf.to_container(typed, resolve=True) == to_container(cfg)
+    plain = to_container(cfg)
+    assert schemas.with_defaults(schemas.CompensateConfig, plain) == plain
+    assert plain["out_dir"] == "/tmp/somewhere/data/reports/compensation"
+    defaults = _schema_defaults("compensate")
+    s1, s2, s0 = plain["seed001"], plain["seed002"], plain["seed000"]
+    if experiment == "compensation_default":
+        assert {k: plain[k] for k in defaults} == defaults
+    elif experiment == "compensation_quick":
+        assert s1["all_configurations"] == "none" and s1["families"] == ["gamma", "bouc_wen"]
+        assert s1["shape_aware"]["curve_angles_deg"] == [15, 45, 75]
+        assert s1["timing"]["steps"]["exact"] == 100 and s2["trials"] == 1
+        # a nested node set in part keeps the schema's other values
+        assert s0["tracking"] == {**defaults["seed000"]["tracking"], "duration_s": 20.0}
+        assert s0["ga"] == {"maxiter": 10, "popsize": 8, "max_samples": 400}
+    else:
+        assert s1["all_configurations"] == "full" and s2["trials"] == 5
+        assert {**s1, "all_configurations": "quick"} == defaults["seed001"]
+    for bad in ("seed001.profilez=8", "seed000.tracking.kpp=0.1", "seed001.ours.registri=tsm",
+                "seed002.trials=two", "seed001.shape_aware.enabled=sometimes",
+                "seed000.segments=[0,3]", "seed002.camera.rate_hz=fast"):
+        with pytest.raises(ConfigCompositionException):
+            _compose("compensate", [f"experiment={experiment}", bad])
+
+
+def test_a_hand_written_compensation_config_gets_the_schema_defaults_and_checks() -> None:
+    from omegaconf.errors import ValidationError
+
+    from pipelines.registry import ALIAS
+    from pipelines.schemas import CompensateConfig, with_defaults
+
+    cfg = with_defaults(CompensateConfig, {"out_dir": "x", "seed001": {"shapes": {"A": [90, 30]}},
+                                           "seed000": {"tracking": {"kp": 0.1}}})
+    assert cfg["seed001"]["shapes"] == {"A": [90, 30]}  # a free mapping replaces the default
+    assert cfg["seed001"]["all_configurations"] == "quick" and cfg["seed002"]["trials"] == 2
+    assert cfg["seed000"]["tracking"]["kp"] == 0.1 and cfg["seed000"]["tracking"]["kd"] == 0.05
+    assert cfg["seed000"]["camera"] == {"rate_hz": 30.0, "latency_s": 0.0, "noise_std": 0.2}
+    assert cfg["seed001"]["ours"]["registry_alias"] == ALIAS
+    with pytest.raises(ValidationError, match="trials"):
+        with_defaults(CompensateConfig, {"seed002": {"trials": "two"}})
 
 
 #: The discrepancy stage, its study and the whole pipeline: config name -> (schema, settings

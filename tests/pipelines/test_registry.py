@@ -145,7 +145,8 @@ def test_compensation_takes_its_model_from_the_registry_when_configured(
 
     tracker = registered["tracker"]
     uri = tracker.settings.tracking_uri  # type: ignore[attr-defined]
-    model = compensate._registry_model({"registry": "tsm", "tracking_uri": uri},
+    model = compensate._registry_model({"registry": "tsm", "registry_alias": registry.ALIAS,
+                                        "tracking_uri": uri},
                                        "tsm-bench", 90.0, 30.0)
     champ = registry.champion_table(tracker).set_index("name").loc["tsm.tsm-bench_phi090_r030"]
     assert model.to_dict()["family"] == champ["family"]
@@ -156,5 +157,6 @@ def test_compensation_takes_its_model_from_the_registry_when_configured(
     u = np.linspace(-3.0, 3.0, 50)
     assert np.array_equal(model.predict(u), own.predict(u))
     with pytest.raises(registry.RegistryError):  # shape B was never registered here
-        compensate._registry_model({"registry": "tsm", "tracking_uri": uri},
+        compensate._registry_model({"registry": "tsm", "registry_alias": registry.ALIAS,
+                                    "tracking_uri": uri},
                                    "tsm-bench", 60.0, 60.0)
