@@ -127,7 +127,7 @@ def injector_sources(cases: dict[str, dict[str, float]] | None = None) -> dict[s
     return out
 
 
-#: The bases a verdict must not depend on (issue 18): every auto family, given explicitly.
+#: The bases a verdict must not depend on: every auto family, given explicitly.
 BASES = ("gamma", "gamma_free", "preisach", "bouc_wen", "coleman_hodgdon")
 
 

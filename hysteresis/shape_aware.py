@@ -17,9 +17,10 @@ a set of configurations and hands out a model of the same family for any other o
   thresholds) is taken from the nearest training configuration.
 
 A family whose fit chooses its structure from the data (Gamma picks its play widths from each
-record) gives parameters that do not compare between shapes: the records are then refitted
-with the family's :meth:`~hysteresis.base.HysteresisModel.common_structure` (one grid for all),
-and fitted models that disagree are refused.
+record) gives parameters that do not compare between shapes: the records are then refitted on
+one structure (:func:`refit_on_common_structure`: of the family's
+:meth:`~hysteresis.base.HysteresisModel.structure_candidates`, the one that fits all the
+records best), and fitted models that disagree are refused.
 
 Because the regression is linear in the training values, a linear constraint every training
 model satisfies (Gamma's ``sum(Q) = 1``) holds for the predicted model too.
