@@ -9,7 +9,7 @@ head's input (the state the head left) and scored.
 
 "Hand-tuned" is the best of a grid of settings a user who knows the data (deg, 60 deg swing,
 100 Hz, a lag under a second) would try, chosen per shape by the *held-out* RMSE: an oracle,
-so the comparison is as hard on the defaults as it can be. The goal (issue 17) is defaults
+so the comparison is as hard on the defaults as it can be. The goal is defaults
 within 10 % of it. ``python -m bench.bench_defaults`` prints the JSON.
 """
 

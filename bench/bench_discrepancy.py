@@ -62,7 +62,7 @@ def run() -> dict[str, Any]:
     }
 
 
-#: The issue-18 matrix: each injected effect at two strengths, plus clean sources.
+#: The injector matrix: each injected effect at two strengths, plus clean sources.
 STRENGTHS = (1.0, 2.0)
 
 
@@ -82,7 +82,7 @@ def injector_sources(cases: dict[str, dict[str, float]] | None = None) -> dict[s
     the workflow, a second base when the first leaves a residual) on three 80 s runs from the
     independent injector (plain Gamma, Preisach and Bouc-Wen plants): per source the seconds,
     the base kept, the verdict, what was named and the held-out change against the best plain
-    family; the summary scores the matrix as issue 18 states it (hidden effect named first
+    family; the summary scores the matrix against the workflow's bar (hidden effect named first
     and held-out RMSE at least halved; no effect named on clean sources).
 
     ``python -m bench.bench_discrepancy --injector`` runs it alone; ``run()`` includes it."""

@@ -674,7 +674,7 @@ def _shape_aware_table(t42: pd.DataFrame, shapes: Iterable[str]) -> pd.DataFrame
 
 
 def headline(tables: Mapping[str, pd.DataFrame], cfg: Mapping[str, Any]) -> dict[str, float]:
-    """Reductions (percent) the issue's targets are stated in."""
+    """Reductions (percent), the unit the targets are stated in."""
     m: dict[str, float] = {}
     t42 = tables.get("seed001_table42")
     if t42 is not None and len(t42):

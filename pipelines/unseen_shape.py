@@ -51,7 +51,7 @@ log = logging.getLogger(__name__)
 COLUMNS = ("family", "curve_angle_deg", "radius_mm", "predictor", "rmse")
 PREDICTORS = ("own", "nearest", "shape_aware")
 KEY_FILE = "unseen_shape_key.json"
-#: The issue's targets for the best family: shape-aware median LOO RMSE at most this times
+#: The targets for the best family: shape-aware median LOO RMSE at most this times
 #: the own-configuration median, and below the nearest model in this share of configurations.
 RATIO_TARGET = 1.15
 BELOW_NEAREST_SHARE = 20 / 24

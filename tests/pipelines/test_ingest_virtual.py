@@ -1,4 +1,4 @@
-"""Done-when of the ingest issue: virtual-rig runs written as folders, .bag, .db3 and .mcap
+"""What ingest must do with virtual-rig runs written as folders, .bag, .db3 and .mcap
 ingest to the same dataset (within float tolerance), and ingest recovers the rig's truth."""
 
 from __future__ import annotations
