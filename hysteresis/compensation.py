@@ -201,7 +201,8 @@ def run_open_loop(
     step: StepFn, command: Any, *, desired: Any, dt_s: float = 0.01, output_key: str = "output",
     stroke: StrokeLimits | None = None, scheme: str = "open_loop",
 ) -> LoopResult:
-    """Play ``command`` (clipped to ``stroke``) through the plant, one tick per sample."""
+    """Play ``command`` (clipped to ``stroke``) through the plant, one tick per sample (all at
+    once through ``step.many(commands)`` where the step function has it)."""
     _check_dt(dt_s)
     u = as_1d(command, "command")
     yd = as_1d(desired, "desired")
@@ -209,9 +210,11 @@ def run_open_loop(
         raise HysteresisError(f"command and desired differ in length: {u.size} vs {yd.size}")
     lim = stroke or StrokeLimits()
     applied = np.clip(u, lim.low, lim.high)
-    y = np.empty_like(u)
-    for k in range(u.size):
-        y[k] = _output(step(float(applied[k])), output_key)
+    # the whole command is known in advance: a plant that can take it at once (``step.many``,
+    # e.g. the virtual rig) runs it in one call; its readings are those of tick by tick
+    many = getattr(step, "many", None)
+    rows = many(applied) if callable(many) else [step(float(c)) for c in applied]
+    y = np.array([_output(r, output_key) for r in rows], dtype=np.float64)
     t = _ticks(u.size, dt_s)
     return LoopResult(scheme, t, yd, applied, y, np.full_like(y, np.nan))
 

@@ -205,66 +205,79 @@ class VirtualRig:
         core = self._core
         core.reset()
         row = core.initial_row()
-        self._t_fine = [0.0]
-        self._y_fine = [0.0]
+        self._t_fine: FloatArray = np.zeros(1)
+        self._y_fine: FloatArray = np.zeros(1)
         self._cmd = 0.0
-        return self._reading(0.0, row)
+        return self._readings(np.zeros(1), row[None, :], np.zeros(1), self._t_fine,
+                              self._y_fine)[0]
 
     def step(self, command: float) -> dict[str, float]:
         """Hold ``command`` (mm of pull, or deg of motor angle) for one tick; read the sensors."""
-        cmd = float(command)
-        if not math.isfinite(cmd):
-            raise ValueError(f"command must be finite, got {command!r}")
+        return self.step_many(np.array([command], dtype=np.float64))[0]
+
+    def step_many(self, commands: npt.ArrayLike) -> list[dict[str, float]]:
+        """Hold each of ``commands`` for one tick, in order; the readings :meth:`step` would
+        return one by one (the same numbers), for a command sequence known in advance: one
+        physics call instead of one per tick, as an open-loop or identification run needs."""
+        cmds = np.asarray(commands, dtype=np.float64).ravel()
+        if cmds.size == 0:
+            return []
+        if not np.all(np.isfinite(cmds)):
+            bad = cmds[~np.isfinite(cmds)][0]
+            raise ValueError(f"command must be finite, got {bad!r}")
         core = self._core
-        k0 = core.ticks * core.n_sub
-        rec = core.run(core.command_to_mm(np.array([cmd])))
+        ticks0 = core.ticks
+        rec = core.run(core.command_to_mm(cmds))
         dt = core.params.physics_dt_s
-        self._t_fine.extend(((k0 + 1 + np.arange(rec.shape[0])) * dt).tolist())
-        self._y_fine.extend(rec[:, 1].tolist())
+        k0 = ticks0 * core.n_sub
+        t_fine = np.concatenate([self._t_fine, (k0 + 1 + np.arange(rec.shape[0])) * dt])
+        y_fine = np.concatenate([self._y_fine, rec[:, 1]])
         # Keep only what the delay can still reach.
         keep = int(core.effects.delay_s() / dt) + 2 * core.n_sub + 2
-        if len(self._t_fine) > 4 * keep:
-            self._t_fine = self._t_fine[-keep:]
-            self._y_fine = self._y_fine[-keep:]
-        self._cmd = cmd
-        return self._reading(core.ticks * self.dt_s, rec[-1])
+        self._t_fine, self._y_fine = ((t_fine[-keep:], y_fine[-keep:])
+                                      if t_fine.shape[0] > 4 * keep else (t_fine, y_fine))
+        self._cmd = float(cmds[-1])
+        t: FloatArray = (ticks0 + 1 + np.arange(cmds.size, dtype=np.float64)) * self.dt_s
+        return self._readings(t, rec[core.n_sub - 1::core.n_sub], cmds, t_fine, y_fine)
 
-    def _reading(self, t: float, row: FloatArray) -> dict[str, float]:
+    def _readings(self, t: FloatArray, rows: FloatArray, cmds: FloatArray, tf: FloatArray,
+                  yf: FloatArray) -> list[dict[str, float]]:
+        """The sensor readings at times ``t`` of the physics rows ``rows`` (one per tick)."""
         core = self._core
         cfg = core.sensor_cfg
-        tt = np.array([t])
-        tf = np.asarray(self._t_fine)
-        yf = np.asarray(self._y_fine)
-        y_meas = float(core.measured_output(tt, tf, yf)[0])
-        y_true = float(_truth_output(core, tt, tf, yf)[0])
-        x_mm = float(row[0])
+        y_meas = core.measured_output(t, tf, yf)
+        y_true = _truth_output(core, t, tf, yf)
+        x_mm = rows[:, 0]
         q = 1.0 / cfg.counts_per_mm
-        rng = core.streams.step_noise
         npm = cfg.newton_per_mv_per_v
         noise_n = cfg.loadcell_noise_mv_per_v * npm
         rng_n = cfg.loadcell_range_n
-        out: dict[str, float] = {"t_s": t, "command": self._cmd}
+        # one (input, output) load-cell noise pair per tick, in tick order
+        noise = core.streams.step_noise.normal(0, noise_n, size=(t.shape[0], 2))
+        cols: dict[str, FloatArray] = {"t_s": t, "command": cmds}
         if cfg.input_unit == "deg":
             qd = 1.0 / cfg.counts_per_deg
-            ang = math.degrees(x_mm / core.params.pulley_radius_mm)
-            out["input"] = round(ang / qd) * qd
+            cols["input"] = np.round(np.degrees(x_mm / core.params.pulley_radius_mm) / qd) * qd
         else:
-            out["input"] = round(x_mm / q) * q
+            cols["input"] = np.round(x_mm / q) * q
         if self.rig == "bending-joint":
-            ang_meas = float(core.output_quantity(np.array([y_meas]))[0])
-            out["output"] = ang_meas
-            out["tip_angle_deg"] = ang_meas
+            ang_meas = np.asarray(core.output_quantity(y_meas), dtype=np.float64)
+            cols["output"] = ang_meas
+            cols["tip_angle_deg"] = ang_meas
         else:
-            out["output"] = round(y_meas / q) * q
-        out["tension_in_n"] = float(np.clip(row[2] + rng.normal(0, noise_n), -rng_n, rng_n))
-        out["tension_out_n"] = float(np.clip(row[3] + rng.normal(0, noise_n), -rng_n, rng_n))
-        out["true_input_mm"] = x_mm
-        out["true_output_mm"] = y_true
-        out["true_tension_in_n"] = float(row[2])
-        out["true_tension_out_n"] = float(row[3])
+            cols["output"] = np.round(y_meas / q) * q
+        cols["tension_in_n"] = np.clip(rows[:, 2] + noise[:, 0], -rng_n, rng_n)
+        cols["tension_out_n"] = np.clip(rows[:, 3] + noise[:, 1], -rng_n, rng_n)
+        cols["true_input_mm"] = x_mm
+        cols["true_output_mm"] = y_true
+        cols["true_tension_in_n"] = rows[:, 2]
+        cols["true_tension_out_n"] = rows[:, 3]
         if self.rig == "bending-joint":
-            out["true_tip_angle_deg"] = float(core.output_quantity(np.array([y_true]))[0])
-        return out
+            cols["true_tip_angle_deg"] = np.asarray(core.output_quantity(y_true),
+                                                    dtype=np.float64)
+        keys = list(cols)
+        return [dict(zip(keys, vals, strict=True))
+                for vals in zip(*(cols[k].tolist() for k in keys), strict=True)]
 
 
 def _run_id(curve: float, radius: float, kind: str, index: int) -> str:

@@ -56,6 +56,30 @@ def test_gamma_inverse_and_ours_on_the_virtual_bench(bench: object) -> None:
     assert stroke.contains(mine.command) and stroke.contains(ff.command)
 
 
+def test_open_loop_plays_a_known_command_in_one_call_with_the_same_readings(
+        bench: object) -> None:
+    class Batched:  # a step function that can also take the whole command at once
+        def __init__(self, rig: object) -> None:
+            self.rig, self.calls = rig, 0
+
+        def __call__(self, command: float) -> object:
+            return self.rig.step(command)  # type: ignore[attr-defined]
+
+        def many(self, commands: np.ndarray) -> object:
+            self.calls += 1
+            return self.rig.step_many(commands)  # type: ignore[attr-defined]
+
+    u = sine_profile(np.arange(0.0, 4.0, DT), periods_per_amplitude=1)
+    stroke = StrokeLimits(-2.0, 2.0)  # clips: the clipped command is what is played
+    tick = run_open_loop(_fresh(bench), u, desired=u, stroke=stroke)  # type: ignore[arg-type]
+    bench.reset()  # type: ignore[attr-defined]
+    batched = Batched(bench)
+    once = run_open_loop(batched, u, desired=u, stroke=stroke)  # type: ignore[arg-type]
+    assert batched.calls == 1
+    np.testing.assert_array_equal(once.command, tick.command)
+    np.testing.assert_array_equal(once.output, tick.output)
+
+
 def test_vision_feedback_is_stable_on_the_virtual_bending_joint() -> None:
     rig = virtual.VirtualRig(rig="bending-joint", curve_angle_deg=60, radius_mm=45, seed=1,
                              sensors={"input_unit": "deg"})

@@ -149,6 +149,32 @@ def test_step_interface_equals_whole_trajectory() -> None:
                                                      effects=effects).step(1.0))
 
 
+@pytest.mark.parametrize("rig_name, sensors", [("tsm-bench", None),
+                                               ("bending-joint", {"input_unit": "deg"})])
+def test_step_many_returns_exactly_the_readings_of_step_by_step(
+        rig_name: str, sensors: dict[str, str] | None) -> None:
+    # delay and drift make the readings depend on the kept history; the chunks are uneven so
+    # that a chunk boundary falls everywhere in the servo and history windows
+    effects = {"time_delay": 1.0, "drift": 1.0, "rate_dependence": 1.0}
+    cmd = 40.0 * np.sin(np.linspace(0.0, 6.0 * np.pi, 700)) if sensors else \
+        3.0 * np.sin(np.linspace(0.0, 6.0 * np.pi, 700))
+
+    def make() -> VirtualRig:
+        return VirtualRig(rig=rig_name, curve_angle_deg=75, radius_mm=30, seed=9,
+                          effects=effects, sensors=sensors)
+
+    one, many = make(), make()
+    assert one.reset() == many.reset()
+    expected = [one.step(float(c)) for c in cmd]
+    got: list[dict[str, float]] = []
+    for chunk in np.split(cmd, [1, 4, 97, 98, 350, 651]):
+        got.extend(many.step_many(chunk))
+    assert got == expected  # every key, bit for bit
+    assert many.step(0.5) == one.step(0.5)  # and the state both leave behind is the same
+    with pytest.raises(ValueError, match="finite"):
+        many.step_many([0.0, float("nan")])
+
+
 def test_bending_joint_step_reports_tip_angle_and_degree_commands() -> None:
     rig = VirtualRig(rig="bending-joint", curve_angle_deg=45, radius_mm=45,
                      sensors={"input_unit": "deg"})
