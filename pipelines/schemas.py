@@ -529,6 +529,15 @@ class Seed002Feedback:
 
 
 @dataclass
+class Seed002Case:
+    """One of ViO-Com's hysteresis cases: a sheath shape."""
+
+    name: str = MISSING
+    curve_angle_deg: float = MISSING
+    radius_mm: float = MISSING
+
+
+@dataclass
 class Seed002Settings:
     """``seed002``: ViO-Com Table I on the bending joint (vision feedback vs Bouc-Wen
     feed-forward vs ours)."""
@@ -537,10 +546,11 @@ class Seed002Settings:
     rig: str = "bending-joint"
     sensors: dict[str, Any] = field(default_factory=lambda: {"input_unit": "deg"})
     tracker_key: str = "tip_angle_deg"
-    #: Four hysteresis cases = four sheath shapes (largest hysteresis first): label ->
-    #: [curve angle deg, radius mm].
-    cases: dict[str, Any] = field(default_factory=lambda: {
-        "case1": [90, 30], "case2": [75, 45], "case3": [45, 60], "case4": [15, 75]})
+    #: Four hysteresis cases = four sheath shapes (largest hysteresis first). A list, so that
+    #: an experiment giving fewer cases replaces these rather than adding to them.
+    cases: list[Seed002Case] = field(default_factory=lambda: [
+        Seed002Case(f"case{i}", phi, r)
+        for i, (phi, r) in enumerate(((90, 30), (75, 45), (45, 60), (15, 75)), start=1)])
     calibration: Seed002Calibration = field(default_factory=Seed002Calibration)
     amplitude: float = 30.0
     offset: float = 30.0

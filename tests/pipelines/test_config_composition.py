@@ -260,15 +260,19 @@ def test_compensation_experiments_compose_and_validate(experiment: str) -> None:
         assert s1["all_configurations"] == "none" and s1["families"] == ["gamma", "bouc_wen"]
         assert s1["shape_aware"]["curve_angles_deg"] == [15, 45, 75]
         assert s1["timing"]["steps"]["exact"] == 100 and s2["trials"] == 1
+        # the list of cases replaces the default four (a mapping would have merged into them)
+        assert s2["cases"] == [{"name": "case1", "curve_angle_deg": 90.0, "radius_mm": 30.0}]
         # a nested node set in part keeps the schema's other values
         assert s0["tracking"] == {**defaults["seed000"]["tracking"], "duration_s": 20.0}
         assert s0["ga"] == {"maxiter": 10, "popsize": 8, "max_samples": 400}
     else:
         assert s1["all_configurations"] == "full" and s2["trials"] == 5
+        assert [c["name"] for c in s2["cases"]] == ["case1", "case2", "case3", "case4"]
         assert {**s1, "all_configurations": "quick"} == defaults["seed001"]
     for bad in ("seed001.profilez=8", "seed000.tracking.kpp=0.1", "seed001.ours.registri=tsm",
                 "seed002.trials=two", "seed001.shape_aware.enabled=sometimes",
-                "seed000.segments=[0,3]", "seed002.camera.rate_hz=fast"):
+                "seed000.segments=[0,3]", "seed002.camera.rate_hz=fast",
+                "seed002.cases=[{name:c,curve_angle_deg:steep,radius_mm:30}]"):
         with pytest.raises(ConfigCompositionException):
             _compose("compensate", [f"experiment={experiment}", bad])
 
