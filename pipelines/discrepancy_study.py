@@ -52,6 +52,10 @@ STUDY_EXCITATIONS: dict[str, dict[str, Any]] = {
 }
 
 
+#: What an ``expect`` row of the study can ask of a case.
+OUTCOMES = ("halved", "named", "clean")
+
+
 class StudyError(Exception):
     """Bad configuration for the discrepancy study."""
 
@@ -229,6 +233,45 @@ def detection_limits(cases: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, 
     return out
 
 
+def shortfalls(cases: Sequence[Mapping[str, Any]], combos: Sequence[Mapping[str, Any]],
+               expect: Sequence[Mapping[str, Any]], *,
+               combination_reduction: float) -> list[str]:
+    """The study's expectations a run did not meet, one line each (empty: all met).
+
+    Clean cases must name nothing; each combination must name every hidden effect and remove
+    at least ``combination_reduction`` of the pooled held-out RMSE; each ``expect`` row
+    (``effect``, ``strength``, ``pair``, ``outcome``, ``min_reduction``) must show its outcome
+    where the study ran that case."""
+    out = [f"clean on pair {c['pair']}: named {c['named']}" for c in cases
+           if c["effect"] == "clean" and c["named"]]
+    for c in combos:
+        if not c["all_named"]:
+            out.append(f"{c['label']} on pair {c['pair']}: named {c['named']}, "
+                       f"measured {c['measured']}")
+        elif c["reduction"] < combination_reduction:
+            out.append(f"{c['label']} on pair {c['pair']}: terms remove "
+                       f"{100 * c['reduction']:.0f} % < {100 * combination_reduction:.0f} %")
+    by_key = {(c["effect"], float(c["strength"]), c["pair"]): c for c in cases}
+    for e in expect:
+        c = by_key.get((e["effect"], float(e["strength"]), e["pair"]))
+        if c is None:
+            continue
+        what = f"{e['effect']} {float(e['strength']):g} on pair {e['pair']}"
+        outcome = e.get("outcome", "halved")
+        if outcome == "clean":
+            if c["named"]:
+                out.append(f"{what}: expected no effect, named {c['named']}")
+        elif not c["correct"]:
+            out.append(f"{what}: named first {c['first_named']!r}")
+        elif outcome == "halved" and not c["halved"]:
+            per = ", ".join(f"{100 * v:.0f} %" for v in c["reduction_per_configuration"].values())
+            out.append(f"{what}: not halved in every configuration ({per})")
+        elif outcome == "named" and c["reduction"] < float(e.get("min_reduction", 0.0)):
+            out.append(f"{what}: removes {100 * c['reduction']:.0f} % < "
+                       f"{100 * float(e['min_reduction']):.0f} %")
+    return out
+
+
 def markdown(cases: Sequence[Mapping[str, Any]]) -> str:
     """The study as Markdown: one row per case, then the detection limits."""
     lines = ["# Discrepancy workflow: detection study", "",
@@ -321,6 +364,9 @@ def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
         if bad:
             raise StudyError(f"combinations: unknown effect(s) {bad}; "
                              f"known: {list(EFFECT_NAMES)}")
+    bad_outcome = [e["outcome"] for e in cfg["expect"] if e["outcome"] not in OUTCOMES]
+    if bad_outcome:
+        raise StudyError(f"expect: unknown outcome(s) {bad_outcome}; known: {list(OUTCOMES)}")
     t0 = time.perf_counter()
     cases = run_study(strengths=strengths,
                       pairs={p: all_pairs[p] for p in chosen}, seed=int(cfg["seed"]),
@@ -347,6 +393,11 @@ def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
     _track(cfg, cases, [json_path, md_path], combos)
     log.info("wrote %s and %s (%d cases, %.0f s)", json_path, md_path, len(cases),
              doc["elapsed_s"])
+    missed = shortfalls(cases, combos, cfg["expect"],
+                        combination_reduction=float(cfg["expect_combination_reduction"]))
+    if missed:
+        raise StudyError(f"the study fell short of {len(missed)} expectation(s) "
+                         f"(tables written to {md_path}):\n  " + "\n  ".join(missed))
     return cases
 
 

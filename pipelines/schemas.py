@@ -314,6 +314,32 @@ class DiscrepancyConfig:
 
 
 @dataclass
+class StudyExpectation:
+    """What one single-effect case of the study must show (``expect`` of the study)."""
+
+    effect: str = MISSING
+    strength: float = MISSING
+    pair: str = MISSING
+    #: ``halved``: named first and the held-out RMSE at least halved in every configuration
+    #: of the pair; ``named``: named first; ``clean``: no effect named.
+    outcome: str = "halved"
+    #: With ``named``: the pooled held-out RMSE the first term removes, at least (0..1).
+    min_reduction: float = 0.0
+
+
+def _study_expectations() -> list[StudyExpectation]:
+    halved = [("time_delay", 1.0, "a"), ("saturation", 1.0, "a"), ("dead_zone", 1.0, "e"),
+              ("rate_dependence", 1.0, "e"), ("rate_dependence", 1.5, "a"), ("drift", 2.0, "a"),
+              ("asymmetry", 2.0, "a"), ("tendon_elongation", 12.0, "e")]
+    return [*(StudyExpectation(e, s, p) for e, s, p in halved),
+            # the stretch goes with the tension squared: on pair a it is named from 2 and
+            # removes half the error only from 8 (in the 90 deg configuration)
+            StudyExpectation("tendon_elongation", 8.0, "a", "named", 0.5),
+            StudyExpectation("tendon_elongation", 2.0, "a", "named", 0.2),
+            StudyExpectation("tendon_elongation", 1.0, "a", "clean")]
+
+
+@dataclass
 class DiscrepancyStudyConfig:
     """``conf/discrepancy_study.yaml``: detection limits of the discrepancy workflow. Each case
     hides one effect at one strength in virtual-rig runs of a configuration pair (seed 001's
@@ -367,6 +393,14 @@ class DiscrepancyStudyConfig:
         },
         "pairs_selected": ["a"],
     })
+    #: What the study must show, checked after its tables are written (a shortfall fails the
+    #: stage, naming each case): every clean case answers no effect, every two-effect
+    #: combination names both effects and its terms remove at least
+    #: ``expect_combination_reduction`` of the pooled held-out RMSE, and each single-effect
+    #: case listed here shows its outcome (a case the selection left out is not checked).
+    #: ``expect=[]`` keeps only the clean and combination checks.
+    expect: list[StudyExpectation] = field(default_factory=_study_expectations)
+    expect_combination_reduction: float = 0.4
     #: Seed of the virtual rig's runs.
     seed: int = 3
     #: The runs are analysed at this rate (Hz; moving-average decimation).

@@ -7,9 +7,12 @@ dataset rows: the effect is hidden from it. "Halved" is checked in *each* config
 pair, not only pooled.
 
 Strengths: 1 = the rig's nominal size (docs/virtual-rig.md has the physical meaning and the
-range we take as realistic for each). The smallest strength at which each effect is named first
-and halved, on five configuration pairs, is what ``make discrepancy-study`` measures
-(docs/notes/discrepancy-measurements.md); the cases below sit at or above those limits.
+range we take as realistic for each). These tests check the workflow's logic: the clean
+verdict, the load cells' evidence, the ablations, the joint refit. Which effect is named first
+and halved at which strength, and the two-effect combinations, are study-size figures:
+``make discrepancy-study`` measures them on five configuration pairs
+(docs/notes/discrepancy-measurements.md) and fails unless each case of its ``expect`` list (every
+effect on the pairs used here), every clean case and every combination shows what it should.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from hysteresis.discrepancy.workflow import (
     group_runs,
     run_workflow,
 )
-from pipelines.discrepancy_study import hidden_effect_runs, per_configuration_heldout
+from pipelines.discrepancy_study import hidden_effect_runs
 from rig_io.virtual.effects import EffectStrengths
 
 # dozens of discrepancy workflows on simulated campaigns: `make test-fast` leaves these out
@@ -56,15 +59,6 @@ def first(rep: dict[str, Any]) -> dict[str, Any]:
     return rep["effects"][0]
 
 
-def reduction(effect: dict[str, Any]) -> float:
-    return 1.0 - effect["heldout_rmse_after"] / effect["heldout_rmse_before"]
-
-
-def per_config_reduction(rep: dict[str, Any]) -> dict[str, float]:
-    before, after = per_configuration_heldout(rep, 0), per_configuration_heldout(rep, 1)
-    return {k.split(",rig")[0]: 1.0 - after[k] / before[k] for k in before}
-
-
 def ranked(rep: dict[str, Any], name: str, round_: int = 0) -> dict[str, Any]:
     return next(s for s in rep["rankings"][round_] if s["name"] == name)
 
@@ -84,26 +78,6 @@ def test_clean_runs_have_no_missing_effect():
     assert all(s["relative_gain"] < 0.2 for s in rep["rankings"][0])
     # and the load cells show none of the effects they can read
     assert rep["measured_within_reach"] == []
-
-
-@pytest.mark.parametrize(("effect", "strength", "pair"), [
-    ("time_delay", 1.0, "a"),  # 50 ms
-    ("saturation", 1.0, "a"),  # follower stop 4.2 mm from rest
-    ("dead_zone", 1.0, "e"),  # 0.4 mm actuator-side backlash
-    ("rate_dependence", 1.0, "e"),  # +54 % friction at the held-out 6 mm/s
-    ("rate_dependence", 1.5, "a"),
-    ("drift", 2.0, "a"),  # 0.6 mm creep, 60 s time constant
-    ("asymmetry", 2.0, "a"),  # load cells read a pull/release friction ratio of ~4
-])
-def test_hidden_effect_is_named_first_and_halves_the_heldout_error(effect, strength, pair):
-    rep = report({effect: strength}, pair=pair)
-    e = first(rep)
-    assert e["name"] == effect
-    per = per_config_reduction(rep)
-    assert len(per) == 2 and min(per.values()) >= 0.5, (effect, per)
-    assert e["rmse_after"] < e["rmse_before"]
-    # every held-out run of both configurations improves
-    assert e["evidence"]["runs_improved"] == 1.0
 
 
 def test_load_cell_effects_are_corroborated_by_the_load_cells():
@@ -143,22 +117,6 @@ def test_a_dead_zone_the_asymmetry_term_reproduces_is_named_from_the_load_cells(
     # the clean level: what is left is what the Gamma base leaves on clean runs
     clean = report({})
     assert rep["summary"]["heldout_rmse_after"] < 1.1 * clean["summary"]["heldout_rmse_before"]
-
-
-def test_tendon_elongation_is_named_where_the_tension_is_high():
-    # 8-16 = extra strain 5e-6 x s x T^2 (0.4-0.8 % at 10 N): a braided polymer tendon; 1-2 a
-    # metal cable's constructional stretch. The stretch goes with T^2, so it shows where the
-    # wrap (and the tension) is large: on this pair named first from 2, not at 1; halved in
-    # both 90 deg configurations at 12 (docs/notes/discrepancy-measurements.md).
-    e12 = report({"tendon_elongation": 12.0}, pair="e")
-    assert first(e12)["name"] == "tendon_elongation"
-    assert min(per_config_reduction(e12).values()) >= 0.5
-    a8 = report({"tendon_elongation": 8.0})
-    assert first(a8)["name"] == "tendon_elongation" and reduction(first(a8)) >= 0.5
-    assert per_config_reduction(a8)["curve_angle_deg=90.0,radius_mm=30.0"] >= 0.5
-    a2 = report({"tendon_elongation": 2.0})
-    assert first(a2)["name"] == "tendon_elongation" and reduction(first(a2)) >= 0.2
-    assert report({"tendon_elongation": 1.0})["verdict"] == "no_missing_effect"
 
 
 def test_without_physical_evidence_weak_friction_asymmetry_is_misnamed():
@@ -208,30 +166,21 @@ def test_interacting_effects_are_found_as_a_pair():
     assert greedy["residual"]["rmse_over_noise"] > WorkflowSettings().clean_factor
 
 
+# Two of the two-effect cases; `make discrepancy-study` runs all 21 combinations of the seven
+# effects on pair a (the same runs and settings) and fails unless each names both effects.
+# Several of them are regression cases, found only once the search changed:
+# - dead_zone + drift, dead_zone + rate_dependence: the refit must be joint in the earlier
+#   term's nonlinear parameter (delay, speed law, time constant);
+# - asymmetry + tendon_elongation, dead_zone + tendon_elongation: one compliance coefficient
+#   (two per-part coefficients took opposite signs next to a second effect);
+# - dead_zone + time_delay: the candidate is also fitted first (kept below);
+# - rate_dependence + time_delay: the speed law reads the speed the contact has been sliding
+#   at (a centred difference left its misfit to the delay);
+# - saturation + tendon_elongation, rate_dependence + tendon_elongation: the stretch acts on
+#   the input side.
 @pytest.mark.parametrize("effects", [
     {"time_delay": 1.0, "drift": 2.0},
-    {"rate_dependence": 1.0, "drift": 2.0},
-    {"rate_dependence": 1.0, "saturation": 1.0},
-    # the tension-profile term and a latency: one shapes the loop, the other shifts it in time
-    {"tendon_elongation": 8.0, "time_delay": 1.0},
-    # found only when the refit is joint in the nonlinear parameters (the earlier term's
-    # delay, speed law or time constant is searched again with the dead zone in place)
-    {"dead_zone": 1.0, "drift": 2.0},
-    {"dead_zone": 1.0, "rate_dependence": 1.0},
-    # found only with one compliance coefficient (two per-part coefficients took opposite
-    # signs next to a second effect and the sign check rejected a real stretch)
-    {"asymmetry": 2.0, "tendon_elongation": 8.0},
-    {"dead_zone": 1.0, "tendon_elongation": 8.0},
-    # found only when the candidate is also fitted first (the delay chosen alone holds the
-    # dead zone's share; searched again on top it stays in that basin and a drift wins)
     {"dead_zone": 1.0, "time_delay": 1.0},
-    # found only with the speed law reading the speed the contact has been sliding at (with a
-    # centred difference its own misfit was left for the delay, which then removed 18.6 %)
-    {"rate_dependence": 1.0, "time_delay": 1.0},
-    # found only with the stretch on the input side (subtracted from the output, it moved the
-    # output where friction holds it: spikes of up to 1 mm as the tension jumps off the stop)
-    {"saturation": 1.0, "tendon_elongation": 8.0},
-    {"rate_dependence": 1.0, "tendon_elongation": 8.0},
 ], ids=lambda e: "+".join(e))
 def test_two_hidden_effects_are_both_named(effects):
     rep = report(effects)

@@ -45,6 +45,8 @@ def test_config_composes_with_every_effect_and_five_pairs(tmp_path: Path) -> Non
     ({"effects_selected": [], "combinations": {"strengths": {"drift": 1.0},
                                                "pairs_selected": ["q"]}}, "unknown pair"),
     ({"out": ""}, "out=<path stem> is required"),
+    ({"expect": [{"effect": "drift", "strength": 1.0, "pair": "a", "outcome": "found",
+                  "min_reduction": 0.0}]}, "unknown outcome"),
 ])
 def test_bad_configuration_is_named(tmp_path: Path, over: dict[str, object],
                                     message: str) -> None:
@@ -84,6 +86,43 @@ def test_detection_limits_take_the_smallest_strength_and_list_misnamings() -> No
     assert "Clean runs: a no_missing_effect, b unexplained" in md
 
 
+def test_shortfalls_name_each_expectation_the_study_missed() -> None:
+    cases = [
+        {**_case("clean", 0.0, "a", [], {}), "verdict": "no_missing_effect"},
+        {**_case("clean", 0.0, "b", ["drift"], {"x": 0.1}), "verdict": "missing_effects_found"},
+        _case("drift", 1.0, "a", ["drift"], {"x": 0.6, "y": 0.4}),  # named, not halved
+        _case("drift", 2.0, "a", ["drift"], {"x": 0.7, "y": 0.6}),
+        _case("time_delay", 1.0, "a", ["drift"], {"x": 0.6, "y": 0.6}),  # misnamed
+        _case("saturation", 0.5, "a", [], {}),
+    ]
+    combos = [
+        {"label": "drift 2 + time_delay 1", "pair": "a", "named": ["drift", "time_delay"],
+         "measured": [], "all_named": True, "reduction": 0.7},
+        {"label": "dead_zone 1 + drift 2", "pair": "a", "named": ["drift"], "measured": [],
+         "all_named": False, "reduction": 0.6},
+        {"label": "asymmetry 2 + drift 2", "pair": "a", "named": ["drift", "asymmetry"],
+         "measured": [], "all_named": True, "reduction": 0.3},
+    ]
+    expect = [{"effect": "drift", "strength": 1.0, "pair": "a", "outcome": "halved"},
+              {"effect": "drift", "strength": 2.0, "pair": "a", "outcome": "halved"},
+              {"effect": "drift", "strength": 1.0, "pair": "a", "outcome": "named",
+               "min_reduction": 0.45},
+              {"effect": "time_delay", "strength": 1.0, "pair": "a", "outcome": "halved"},
+              {"effect": "saturation", "strength": 0.5, "pair": "a", "outcome": "clean"},
+              {"effect": "drift", "strength": 4.0, "pair": "a", "outcome": "halved"}]  # not run
+    missed = study.shortfalls(cases, combos, expect, combination_reduction=0.4)
+    assert missed == [
+        "clean on pair b: named ['drift']",
+        "dead_zone 1 + drift 2 on pair a: named ['drift'], measured []",
+        "asymmetry 2 + drift 2 on pair a: terms remove 30 % < 40 %",
+        "drift 1 on pair a: not halved in every configuration (60 %, 40 %)",
+        "drift 1 on pair a: removes 40 % < 45 %",
+        "time_delay 1 on pair a: named first 'drift'",
+    ]
+    assert study.shortfalls(cases[:1] + cases[3:4], combos[:1], expect,
+                            combination_reduction=0.4) == []
+
+
 def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
     cfg = _cfg(tmp_path, effects_selected=["time_delay"], pairs_selected=["a"],
                combinations={"strengths": {"time_delay": 1.0, "drift": 2.0},
@@ -114,10 +153,17 @@ def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
 def test_study_is_logged_to_mlflow(tmp_path: Path) -> None:
     import mlflow
 
+    # an expectation the case does not meet: the stage writes and logs its tables, then fails
+    # naming the case
     cfg = _cfg(tmp_path, tracking="local", effects_selected=["time_delay"],
-               pairs_selected=["a"], combinations={})
+               pairs_selected=["a"], combinations={},
+               expect=[{"effect": "time_delay", "strength": 1.0, "pair": "a",
+                        "outcome": "clean"}])
     cfg["strengths"]["time_delay"] = [1.0]
-    study.run(cfg)
+    with pytest.raises(study.StudyError, match=r"fell short of 1 expectation.*\n  time_delay 1 "
+                       r"on pair a: expected no effect, named \['time_delay'"):
+        study.run(cfg)
+    assert (tmp_path / "data" / "reports" / "discrepancy_study.md").is_file()
     mlflow.set_tracking_uri(f"sqlite:///{tmp_path}/mlflow.db")
     runs = mlflow.search_runs(search_all_experiments=True)
     child = runs[runs["metrics.cases"].notna()]
