@@ -4,8 +4,10 @@ command again: it completes, leaves no temporary file and no RUNNING MLflow run,
 outputs are byte-identical to those of an uninterrupted run.
 
 Each round kills ``TSM_CRASH_KILLS`` (default 3) of the nine stages, chosen at random, each at
-a random moment within its uninterrupted duration, kills fit once more the moment it has a
-RUNNING MLflow run (a window random moments seldom hit), and runs the others straight through.
+a random moment within its uninterrupted duration, and kills fit once more the moment it has a
+RUNNING MLflow run (a window random moments seldom hit). A killed stage starts from the folder
+and MLflow store the uninterrupted pipeline left before it, and after the same command again
+the whole folder's outputs must equal what the uninterrupted pipeline had after that stage.
 ``TSM_CRASH_ROUNDS=<n>`` repeats the round n times (default 1: about a minute);
 ``TSM_CRASH_KILLS=9`` kills every stage; ``TSM_CRASH_SEED`` replays one sequence.
 """
@@ -23,6 +25,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
@@ -158,6 +161,23 @@ def _outputs(root: Path) -> dict[str, object]:
     return out
 
 
+def _check_recovered(root: Path, expected: dict[str, object], killed: list[Any],
+                     where: str) -> None:
+    """No temporary file, no staging folder of a killed process, no RUNNING run, and the
+    outputs of an uninterrupted run."""
+    leftovers = [p for p in root.rglob("*") if is_temporary(p.name)]
+    assert leftovers == [], where
+    staging = [p for p in Path(tempfile.gettempdir()).glob(f"tsm-mlflow-{host_tag()}-*")
+               if any(p.name.startswith(f"tsm-mlflow-{host_tag()}-{pid}-")
+                      for _, _, pid, _ in killed)]
+    assert staging == [], where
+    client = MlflowClient(f"sqlite:///{root}/mlflow.db")
+    ids = [e.experiment_id for e in client.search_experiments()]
+    running = client.search_runs(ids, "attributes.status = 'RUNNING'") if ids else []
+    assert running == [], where
+    assert _outputs(root) == expected, where
+
+
 def test_kill_minus_9_at_random_moments_then_the_same_command_recovers(
         tmp_path: Path) -> None:
     seed = int(os.environ.get("TSM_CRASH_SEED", time.time_ns() % 1_000_000))
@@ -167,37 +187,40 @@ def test_kill_minus_9_at_random_moments_then_the_same_command_recovers(
     root = tmp_path / "root"
     root.mkdir()
     mlflow_store(root)
-    durations = {stage: _run(stage, root) for stage in STAGES}
-    reference = _outputs(root)
+    # The uninterrupted pipeline, keeping the folder (files and MLflow store) as each stage
+    # found it and the outputs each stage left: a killed stage is replayed from the state it
+    # started from, so the stages before it need not run again.
+    durations: dict[str, float] = {}
+    after: dict[str, dict[str, object]] = {}
+    before: dict[str, Path] = {}
+    for stage in STAGES:
+        before[stage] = tmp_path / "before" / stage
+        shutil.copytree(root, before[stage], symlinks=True)
+        durations[stage] = _run(stage, root)
+        after[stage] = _outputs(root)
+    reference = after["registry"]
     assert len([k for k in reference if "/samples/" in k]) == 6
     assert "data/reports/report.md" in reference and len(reference) > 40
     killed: list[tuple[str, float, int, bool]] = []
     for _ in range(rounds):
-        shutil.rmtree(root)
-        root.mkdir()
-        mlflow_store(root)
         victims = set(rng.sample(list(STAGES), min(n_kills, len(STAGES))))
         for stage in STAGES:
-            if stage in victims:
-                moment = rng.uniform(0.2, 0.9 * durations[stage])
-                killed.append((stage, round(moment, 2), *_kill_at(stage, root, moment)))
-            if stage == "fit":  # and once inside its MLflow logging, every round
-                pid, hit = _kill_when_running(stage, root)
-                assert hit, "fit never showed a RUNNING run to be killed in"
-                killed.append(("fit@mlflow", -1.0, pid, hit))
-            _run(stage, root)
-        where = f"seed {seed}, kills {killed}"
-        leftovers = [p for p in root.rglob("*") if is_temporary(p.name)]
-        assert leftovers == [], where
-        staging = [p for p in Path(tempfile.gettempdir()).glob(f"tsm-mlflow-{host_tag()}-*")
-                   if any(p.name.startswith(f"tsm-mlflow-{host_tag()}-{pid}-")
-                          for _, _, pid, _ in killed)]
-        assert staging == [], where
-        client = MlflowClient(f"sqlite:///{root}/mlflow.db")
-        exp = client.get_experiment_by_name("tsm-hysteresis")
-        running = client.search_runs([exp.experiment_id], "attributes.status = 'RUNNING'")
-        assert running == [], where
-        assert _outputs(root) == reference, where
+            # a random moment for the victims, and fit once more inside its MLflow logging
+            # every round (a window random moments seldom hit)
+            kills = (["random"] if stage in victims else []) + (["mlflow"] if stage == "fit"
+                                                                else [])
+            for kind in kills:
+                shutil.rmtree(root)
+                shutil.copytree(before[stage], root, symlinks=True)
+                if kind == "random":
+                    moment = rng.uniform(0.2, 0.9 * durations[stage])
+                    killed.append((stage, round(moment, 2), *_kill_at(stage, root, moment)))
+                else:
+                    pid, hit = _kill_when_running(stage, root)
+                    assert hit, "fit never showed a RUNNING run to be killed in"
+                    killed.append(("fit@mlflow", -1.0, pid, hit))
+                _run(stage, root)
+                _check_recovered(root, after[stage], killed, f"seed {seed}, kills {killed}")
     assert any(hit for *_, hit in killed), f"no kill landed while a stage ran: {killed}"
 
 
