@@ -8,7 +8,9 @@ first use, makes entering the limit a pair of cheap getter/setter calls.
 
 from __future__ import annotations
 
-from contextlib import AbstractContextManager
+import threading
+from collections.abc import Iterator
+from contextlib import AbstractContextManager, contextmanager
 from functools import lru_cache
 from typing import Any
 
@@ -21,8 +23,25 @@ def _controller() -> ThreadpoolController:
     return ThreadpoolController()
 
 
-def single_thread_blas() -> AbstractContextManager[Any]:
+_held = threading.local()
+
+
+@contextmanager
+def single_thread_blas() -> Iterator[None]:
     """Limit BLAS to one thread inside a ``with`` block: the problems are small enough that
-    threads only add contention, and the pipeline already runs fits in parallel."""
+    threads only add contention, and the pipeline already runs fits in parallel. Inside an
+    outer block (a whole workflow) the inner ones cost nothing: the limit is already held."""
+    if getattr(_held, "depth", 0):
+        _held.depth += 1
+        try:
+            yield
+        finally:
+            _held.depth -= 1
+        return
     limiter: AbstractContextManager[Any] = _controller().limit(limits=1, user_api="blas")
-    return limiter
+    with limiter:
+        _held.depth = 1
+        try:
+            yield
+        finally:
+            _held.depth = 0

@@ -253,9 +253,10 @@ def shortfalls(cases: Sequence[Mapping[str, Any]], combos: Sequence[Mapping[str,
                        f"{100 * c['reduction']:.0f} % < {100 * combination_reduction:.0f} %")
     by_key = {(c["effect"], float(c["strength"]), c["pair"]): c for c in cases}
     for e in expect:
-        c = by_key.get((e["effect"], float(e["strength"]), e["pair"]))
-        if c is None:
+        case = by_key.get((e["effect"], float(e["strength"]), e["pair"]))
+        if case is None:
             continue
+        c = case
         what = f"{e['effect']} {float(e['strength']):g} on pair {e['pair']}"
         outcome = e.get("outcome", "halved")
         if outcome == "clean":

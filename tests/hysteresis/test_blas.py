@@ -26,3 +26,16 @@ def test_nested_limits_restore_in_order() -> None:
             assert _blas_threads() == [1] * len(before)
         assert _blas_threads() == [1] * len(before)
     assert _blas_threads() == before
+
+
+def test_an_error_inside_nested_limits_still_restores_the_count() -> None:
+    before = _blas_threads()
+    try:
+        with single_thread_blas():
+            with single_thread_blas():
+                raise RuntimeError("inside")
+    except RuntimeError:
+        pass
+    assert _blas_threads() == before
+    with single_thread_blas():  # and the next block limits again
+        assert _blas_threads() == [1] * len(before)
