@@ -187,26 +187,29 @@ def test_kill_minus_9_at_random_moments_then_the_same_command_recovers(
     root = tmp_path / "root"
     root.mkdir()
     mlflow_store(root)
-    # The uninterrupted pipeline, keeping the folder (files and MLflow store) as each stage
-    # found it and the outputs each stage left: a killed stage is replayed from the state it
-    # started from, so the stages before it need not run again.
+    # The victims of every round: a random moment for each, and fit once more inside its
+    # MLflow logging every round (a window random moments seldom hit).
+    names = list(STAGES)
+    plan = [sorted(rng.sample(names, min(n_kills, len(names))), key=names.index)
+            for _ in range(rounds)]
+    # The uninterrupted pipeline up to the last victim, keeping the folder (files and MLflow
+    # store) as each stage found it and the outputs each stage left: a killed stage is
+    # replayed from the state it started from, so the stages before it need not run again.
+    last = max(names.index(v) for victims in plan for v in [*victims, "fit"])
     durations: dict[str, float] = {}
     after: dict[str, dict[str, object]] = {}
     before: dict[str, Path] = {}
-    for stage in STAGES:
+    for stage in names[:last + 1]:
         before[stage] = tmp_path / "before" / stage
         shutil.copytree(root, before[stage], symlinks=True)
         durations[stage] = _run(stage, root)
         after[stage] = _outputs(root)
-    reference = after["registry"]
-    assert len([k for k in reference if "/samples/" in k]) == 6
-    assert "data/reports/report.md" in reference and len(reference) > 40
+    assert len([k for k in after["ingest"] if "/samples/" in k]) == 6
+    if "report" in after:
+        assert "data/reports/report.md" in after["report"]
     killed: list[tuple[str, float, int, bool]] = []
-    for _ in range(rounds):
-        victims = set(rng.sample(list(STAGES), min(n_kills, len(STAGES))))
-        for stage in STAGES:
-            # a random moment for the victims, and fit once more inside its MLflow logging
-            # every round (a window random moments seldom hit)
+    for victims in plan:
+        for stage in names[:last + 1]:
             kills = (["random"] if stage in victims else []) + (["mlflow"] if stage == "fit"
                                                                 else [])
             for kind in kills:
