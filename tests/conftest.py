@@ -9,6 +9,32 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
+#: The files that take longest (seconds on 2 cores), longest first. `make test` runs a file
+#: on one worker (``--dist loadfile``) and hands the files out in collection order, so
+#: starting with the longest lets the short ones fill in around them and both workers finish
+#: together.
+LONGEST_FIRST = (
+    "pipelines/test_crash_recovery.py",  # ~180 s
+    "hysteresis/test_discrepancy_rig.py",  # ~120 s
+    "pipelines/test_concurrent_sweeps.py",
+    "pipelines/test_discrepancy_pipeline.py",
+    "pipelines/test_sweep.py",
+    "pipelines/test_discrepancy_study.py",
+    "pipelines/test_config_composition.py",
+)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+
+    def key(item: pytest.Item) -> int:
+        path = Path(str(item.path)).resolve()
+        if not path.is_relative_to(REPO / "tests"):
+            return len(rank)
+        return rank.get(path.relative_to(REPO / "tests").as_posix(), len(rank))
+
+    items.sort(key=key)  # stable: the other files keep their order
+
 
 @pytest.fixture(scope="session")
 def catheter_dir() -> Path:
