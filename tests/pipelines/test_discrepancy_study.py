@@ -123,12 +123,24 @@ def test_shortfalls_name_each_expectation_the_study_missed() -> None:
                             combination_reduction=0.4) == []
 
 
-def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
-    cfg = _cfg(tmp_path, effects_selected=["time_delay"], pairs_selected=["a"],
+def test_one_hidden_effect_end_to_end_logged_and_checked(tmp_path: Path) -> None:
+    import mlflow
+
+    # one effect, one combination, and an expectation the effect's case cannot meet: the
+    # stage writes and logs its tables, then fails naming the case
+    cfg = _cfg(tmp_path, tracking="local", effects_selected=["time_delay"],
+               pairs_selected=["a"],
                combinations={"strengths": {"time_delay": 1.0, "drift": 2.0},
-                             "pairs_selected": ["a"]})
+                             "pairs_selected": ["a"]},
+               expect=[{"effect": "time_delay", "strength": 1.0, "pair": "a",
+                        "outcome": "clean"}])
     cfg["strengths"]["time_delay"] = [1.0]
-    cases = study.run(cfg)
+    with pytest.raises(study.StudyError, match=r"fell short of 1 expectation.*\n  time_delay 1 "
+                       r"on pair a: expected no effect, named \['time_delay'"):
+        study.run(cfg)
+    out = tmp_path / "data" / "reports"
+    doc = json.loads((out / "discrepancy_study.json").read_text())
+    cases = doc["cases"]
     assert [(c["effect"], c["strength"]) for c in cases] == [("clean", 0.0), ("time_delay", 1.0)]
     clean, delay = cases
     assert clean["correct"] and clean["named"] == []
@@ -136,34 +148,17 @@ def test_one_hidden_effect_end_to_end(tmp_path: Path) -> None:
     assert set(delay["reduction_per_configuration"]) == {
         "curve_angle_deg=90.0,radius_mm=30.0,rig=tsm-bench",
         "curve_angle_deg=45.0,radius_mm=60.0,rig=tsm-bench"}
-    out = tmp_path / "data" / "reports"
-    doc = json.loads((out / "discrepancy_study.json").read_text())
     assert doc["detection_limits"]["time_delay"]["a"]["halved_from"] == 1.0
-    assert "| time_delay | a | 1 | 1 | - |" in (out / "discrepancy_study.md").read_text()
+    md = (out / "discrepancy_study.md").read_text()
+    assert "| time_delay | a | 1 | 1 | - |" in md
     assert not list(out.glob("*.tmp*"))
     # the two-effect part: one combination, both named, in the JSON and the table
     (combo,) = doc["combinations"]
     assert combo["effects"] == {"drift": 2.0, "time_delay": 1.0}
     assert combo["all_named"] and combo["all_added"] and not combo["extra"]
     assert combo["reduction"] > 0.5
-    assert "| a | drift 2 + time_delay 1 | time_delay, drift | - | yes |" in (
-        out / "discrepancy_study.md").read_text()
-
-
-def test_study_is_logged_to_mlflow(tmp_path: Path) -> None:
-    import mlflow
-
-    # an expectation the case does not meet: the stage writes and logs its tables, then fails
-    # naming the case
-    cfg = _cfg(tmp_path, tracking="local", effects_selected=["time_delay"],
-               pairs_selected=["a"], combinations={},
-               expect=[{"effect": "time_delay", "strength": 1.0, "pair": "a",
-                        "outcome": "clean"}])
-    cfg["strengths"]["time_delay"] = [1.0]
-    with pytest.raises(study.StudyError, match=r"fell short of 1 expectation.*\n  time_delay 1 "
-                       r"on pair a: expected no effect, named \['time_delay'"):
-        study.run(cfg)
-    assert (tmp_path / "data" / "reports" / "discrepancy_study.md").is_file()
+    assert "| a | drift 2 + time_delay 1 | time_delay, drift | - | yes |" in md
+    # and one MLflow run with the cases' figures
     mlflow.set_tracking_uri(f"sqlite:///{tmp_path}/mlflow.db")
     runs = mlflow.search_runs(search_all_experiments=True)
     child = runs[runs["metrics.cases"].notna()]
