@@ -30,7 +30,7 @@ help:
 	@echo "make compensate  compensation experiments"
 	@echo "make discrepancy RUNS=<dir> REPORT=<file.json>"
 	@echo "make foreign-example  a degree-scale bending joint, one run per shape: pipeline + discrepancy"
-	@echo "make discrepancy-study  detection limits and two-effect cases of the discrepancy workflow (about 4 min)"
+	@echo "make discrepancy-study  detection limits and two-effect cases of the discrepancy workflow, checked (4-9 min)"
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(PY) || $(PYTHON_BOOT) -m venv $(VENV)
