@@ -46,7 +46,14 @@ def test_config_composes_with_every_effect_and_five_pairs(tmp_path: Path) -> Non
                                                "pairs_selected": ["q"]}}, "unknown pair"),
     ({"out": ""}, "out=<path stem> is required"),
     ({"expect": [{"effect": "drift", "strength": 1.0, "pair": "a", "outcome": "found",
-                  "min_reduction": 0.0}]}, "unknown outcome"),
+                  "min_reduction": 0.0}]}, r"expect\[0\]: unknown outcome 'found'"),
+    # a misspelt effect or pair would never match a case: refused, not skipped
+    ({"expect": [{"effect": "drift", "strength": 1.0, "pair": "a", "outcome": "clean",
+                  "min_reduction": 0.0},
+                 {"effect": "dirft", "strength": 1.0, "pair": "a", "outcome": "halved",
+                  "min_reduction": 0.0}]}, r"expect\[1\]: unknown effect 'dirft'"),
+    ({"expect": [{"effect": "drift", "strength": 1.0, "pair": "z", "outcome": "halved",
+                  "min_reduction": 0.0}]}, r"expect\[0\]: unknown pair 'z'"),
 ])
 def test_bad_configuration_is_named(tmp_path: Path, over: dict[str, object],
                                     message: str) -> None:
