@@ -14,8 +14,8 @@ REPO = Path(__file__).resolve().parents[1]
 #: starting with the longest lets the short ones fill in around them and both workers finish
 #: together.
 LONGEST_FIRST = (
-    "pipelines/test_crash_recovery.py",  # ~180 s
     "hysteresis/test_discrepancy_rig.py",  # ~120 s
+    "pipelines/test_crash_recovery.py",  # ~60 s
     "pipelines/test_concurrent_sweeps.py",
     "pipelines/test_discrepancy_pipeline.py",
     "pipelines/test_sweep.py",

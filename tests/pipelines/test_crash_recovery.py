@@ -10,6 +10,10 @@ and MLflow store the uninterrupted pipeline left before it, and after the same c
 the whole folder's outputs must equal what the uninterrupted pipeline had after that stage.
 ``TSM_CRASH_ROUNDS=<n>`` repeats the round n times (default 1: about a minute);
 ``TSM_CRASH_KILLS=9`` kills every stage; ``TSM_CRASH_SEED`` replays one sequence.
+
+Each stage is its own process, started from a fork server that has imported the stage
+modules once (:mod:`tests.pipelines.stage_process`): the same command and a real SIGKILL,
+without four seconds of imports before every start.
 """
 
 from __future__ import annotations
@@ -20,10 +24,9 @@ import random
 import shutil
 import signal
 import sqlite3
-import subprocess
-import sys
 import tempfile
 import time
+from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +35,7 @@ import pytest
 from mlflow import MlflowClient
 
 from rig_io.atomic import host_tag, is_temporary
+from tests.pipelines import stage_process
 from tests.pipelines.pipeline_data import mlflow_store
 
 # kill -9 of stages in subprocesses: `make test-fast` leaves these out
@@ -61,12 +65,11 @@ STAGES: dict[str, list[str]] = {
 }
 
 
-def _cmd(stage: str, root: Path) -> list[str]:
-    module, *args = STAGES[stage]
+def _args(stage: str, root: Path) -> list[str]:
+    _, *args = STAGES[stage]
     quiet = [] if stage in ("validate", "report", "unseen_shape", "discrepancy") \
         else ["progress=false"]
-    return [sys.executable, "-m", module, *args, f"paths.root={root}", *quiet,
-            f"hydra.run.dir={root}/outputs/{stage}"]
+    return [*args, f"paths.root={root}", *quiet, f"hydra.run.dir={root}/outputs/{stage}"]
 
 
 def _env() -> dict[str, str]:
@@ -75,23 +78,29 @@ def _env() -> dict[str, str]:
     return env
 
 
+def _start(stage: str, root: Path) -> BaseProcess:
+    """``python -m pipelines.<stage> ...`` in ``root``, as its own process (stage_process)."""
+    return stage_process.start(STAGES[stage][0], _args(stage, root), cwd=root, env=_env(),
+                               log=root.parent / f"{stage}.log")
+
+
 def _run(stage: str, root: Path) -> float:
     t0 = time.perf_counter()
-    proc = subprocess.run(_cmd(stage, root), cwd=root, env=_env(), capture_output=True,
-                          text=True, timeout=300)
-    assert proc.returncode == 0, f"{stage}: {proc.stderr[-3000:]}"
+    log = root.parent / f"{stage}.log"
+    status = stage_process.run(STAGES[stage][0], _args(stage, root), cwd=root, env=_env(),
+                               log=log, timeout=300)
+    assert status == 0, f"{stage}: {log.read_text()[-3000:]}"
     return time.perf_counter() - t0
 
 
 def _kill_at(stage: str, root: Path, after_s: float) -> tuple[int, bool]:
     """Start ``stage``, SIGKILL it after ``after_s``; (pid, whether it was still running)."""
-    proc = subprocess.Popen(_cmd(stage, root), cwd=root, env=_env(),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        proc.wait(timeout=after_s)
-    except subprocess.TimeoutExpired:
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
+    proc = _start(stage, root)
+    assert proc.pid is not None
+    proc.join(after_s)
+    if proc.exitcode is None:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.join()
         return proc.pid, True
     return proc.pid, False
 
@@ -100,10 +109,10 @@ def _kill_when_running(stage: str, root: Path) -> tuple[int, bool]:
     """Start ``stage`` and SIGKILL it the moment it has a RUNNING run in the MLflow store
     (the window a random moment seldom hits); (pid, whether it was killed there)."""
     db = root / "mlflow.db"
-    proc = subprocess.Popen(_cmd(stage, root), cwd=root, env=_env(),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = _start(stage, root)
+    assert proc.pid is not None
     deadline = time.monotonic() + 120
-    while proc.poll() is None and time.monotonic() < deadline:
+    while proc.exitcode is None and time.monotonic() < deadline:
         try:
             with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=0.2) as con:
                 n = con.execute("SELECT count(*) FROM runs WHERE status = 'RUNNING' "
@@ -112,11 +121,11 @@ def _kill_when_running(stage: str, root: Path) -> tuple[int, bool]:
         except sqlite3.Error:
             n = 0
         if n:
-            proc.send_signal(signal.SIGKILL)
-            proc.wait()
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.join()
             return proc.pid, True
         time.sleep(0.01)
-    proc.wait()
+    proc.join()
     return proc.pid, False
 
 
