@@ -185,6 +185,9 @@ class VirtualRig:
     """
 
     dt_s = 0.01
+    #: Most ticks one :meth:`step_many` call takes: its readings cost about 1 kB a tick, so
+    #: this is about 360 MB (an hour at 100 Hz); a longer sequence goes in several calls.
+    MAX_TICKS_PER_CALL = 360_000
 
     def __init__(self, *, rig: str = "tsm-bench", curve_angle_deg: float, radius_mm: float,
                  effects: dict[str, float] | None = None, seed: int = 0,
@@ -222,6 +225,9 @@ class VirtualRig:
         cmds = np.asarray(commands, dtype=np.float64).ravel()
         if cmds.size == 0:
             return []
+        if cmds.size > self.MAX_TICKS_PER_CALL:
+            raise ValueError(f"{cmds.size} commands in one call; step_many takes at most "
+                             f"{self.MAX_TICKS_PER_CALL} (an hour of ticks): split the sequence")
         if not np.all(np.isfinite(cmds)):
             bad = cmds[~np.isfinite(cmds)][0]
             raise ValueError(f"command must be finite, got {bad!r}")

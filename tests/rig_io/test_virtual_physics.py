@@ -173,6 +173,10 @@ def test_step_many_returns_exactly_the_readings_of_step_by_step(
     assert many.step(0.5) == one.step(0.5)  # and the state both leave behind is the same
     with pytest.raises(ValueError, match="finite"):
         many.step_many([0.0, float("nan")])
+    # past the size limit: refused before the physics runs, the rig's state untouched
+    with pytest.raises(ValueError, match="split the sequence"):
+        many.step_many(np.zeros(VirtualRig.MAX_TICKS_PER_CALL + 1))
+    assert many.step(0.25) == one.step(0.25)
 
 
 def test_bending_joint_step_reports_tip_angle_and_degree_commands() -> None:
