@@ -14,13 +14,16 @@ REPO = Path(__file__).resolve().parents[1]
 #: starting with the longest lets the short ones fill in around them and both workers finish
 #: together.
 LONGEST_FIRST = (
-    "hysteresis/test_discrepancy_rig.py",  # ~120 s
-    "pipelines/test_crash_recovery.py",  # ~60 s
+    "hysteresis/test_discrepancy_rig.py",  # ~90-120 s
+    "pipelines/test_crash_recovery.py",  # ~40-60 s
     "pipelines/test_concurrent_sweeps.py",
+    "pipelines/test_discrepancy_base_check.py",
     "pipelines/test_discrepancy_pipeline.py",
-    "pipelines/test_sweep.py",
-    "pipelines/test_discrepancy_study.py",
+    "pipelines/test_run_lifecycle.py",
     "pipelines/test_config_composition.py",
+    "pipelines/test_discrepancy_study.py",
+    "pipelines/test_sweep.py",
+    "pipelines/test_compensate.py",
 )
 
 
