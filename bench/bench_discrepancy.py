@@ -136,16 +136,22 @@ def base_independence(cases: dict[str, dict[str, float]] | None = None) -> dict[
     explicitly and with ``auto``; the summary counts the sources on which every base agrees
     with auto, and each base's agreement. Default cases: clean and every effect at strength 1.
 
+    Two readings per base: ``first``, the given base's own answer (``base_check`` off), and
+    ``stage``, what the stage answers with its defaults: when that base with its terms fits
+    ``base_misfit_factor`` x worse held out than the best family plain, the best family's own
+    answer (``base_misfit_fallback``), taken from that family's row.
+
     ``python -m bench.bench_discrepancy --bases`` runs it alone (about 25 min on 2 cores)."""
     from hydra import compose, initialize_config_dir
 
     from hysteresis.discrepancy.inject import PLANTS, injected_runs
     from pipelines.common import CONF_DIR, to_container
-    from pipelines.discrepancy import analyse
+    from pipelines.discrepancy import analyse, choose_base
 
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = to_container(compose("discrepancy"))
     families = dict(cfg["auto_families"])
+    factor = float(cfg["base_misfit_factor"])
     if cases is None:
         cases = {k: v for k, v in injector_cases().items()
                  if k == "clean" or k.endswith("@1")}
@@ -169,15 +175,28 @@ def base_independence(cases: dict[str, dict[str, float]] | None = None) -> dict[
                 named = [e["name"] for e in rep["effects"]]
                 row[base] = {"first": named[0] if named else None, "named": named,
                              "verdict": rep["verdict"],
+                             "heldout_rmse_after": rep["summary"]["heldout_rmse_after"],
                              "seconds": round(time.perf_counter() - t0, 1)}
-            row["all_agree"] = all(row[b]["first"] == row["auto"]["first"] for b in BASES)
+            _, _, plain = choose_base(runs, families)
+            best = min(plain, key=plain.__getitem__)
+            for base in BASES:
+                misfit = row[base]["heldout_rmse_after"] > factor * plain[best]
+                row[base]["misfit"] = bool(misfit)
+                row[base]["stage"] = row[best]["first"] if misfit else row[base]["first"]
+            auto = row["auto"]["first"]
+            row["all_agree"] = all(row[b]["first"] == auto for b in BASES)
+            row["all_agree_stage"] = all(row[b]["stage"] == auto for b in BASES)
             out[f"{plant}:{case}"] = row
     rows = list(out.values())
     out["_summary"] = {
         "sources": len(rows),
         "all_bases_agree_with_auto": sum(r["all_agree"] for r in rows),
         "agree_with_auto_by_base": {b: sum(r[b]["first"] == r["auto"]["first"] for r in rows)
-                                    for b in BASES}}
+                                    for b in BASES},
+        "stage_all_bases_agree_with_auto": sum(r["all_agree_stage"] for r in rows),
+        "stage_agree_with_auto_by_base": {
+            b: sum(r[b]["stage"] == r["auto"]["first"] for r in rows) for b in BASES},
+        "misfit_flagged_by_base": {b: sum(r[b]["misfit"] for r in rows) for b in BASES}}
     return out
 
 

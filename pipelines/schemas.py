@@ -284,6 +284,10 @@ class DiscrepancyConfig:
     #: misfit.
     base_check: bool = True
     base_misfit_factor: float = 1.5
+    #: A flagged base does not answer alone: the workflow runs again on the best-fitting
+    #: family, whose verdict and effects are the answer, and what the given base named is
+    #: kept beside it (report: given_base). false: the given base's answer, flagged only.
+    base_misfit_fallback: bool = True
     #: Excitation kinds used for identification when a run's manifest does not say its role
     #: (``excitation.role``); every other run is held out.
     identify_excitations: list[str] = field(default_factory=lambda: ["sine_decay"])

@@ -12,7 +12,7 @@ from hydra import compose, initialize_config_dir
 from hysteresis.discrepancy.inject import SIZES, injected_runs
 from hysteresis.discrepancy.workflow import base_factory_for, run_workflow
 from pipelines.common import CONF_DIR, to_container
-from pipelines.discrepancy import analyse, base_misfit, headline, pick_base
+from pipelines.discrepancy import analyse, base_misfit, choose_base, headline, pick_base
 
 
 @pytest.fixture(scope="module")
@@ -21,14 +21,36 @@ def families() -> dict[str, Any]:
         return dict(to_container(compose("discrepancy"))["auto_families"])
 
 
-def test_a_base_that_cannot_take_the_loop_shape_is_flagged(families: dict[str, Any]) -> None:
+def test_a_flagged_base_is_answered_for_by_the_best_family(families: dict[str, Any]) -> None:
+    """On the clean Preisach plant the thesis' Gamma names an effect, which is its misfit: the
+    check flags it, and the stage's answer is the best family's, saying so."""
     runs = injected_runs("preisach", {})
-    rep = run_workflow(runs, base_factory_for("gamma"), base_name="gamma")
-    assert rep["effects"], "the misfit this check is for: a clean source gets an effect"
-    misfit = base_misfit(runs, rep, families, factor=1.5)
+    kept, _ = analyse(runs, base_family="gamma", auto_families=families,
+                      base_misfit_fallback=False)
+    assert kept["effects"], "the misfit this check is for: a clean source gets an effect"
+    misfit = kept["base_misfit"]
     assert misfit is not None and misfit["best_family"] in ("preisach", "bouc_wen")
-    assert misfit["ratio"] > 5.0
-    assert "caution: base gamma fits this source" in headline({**rep, "base_misfit": misfit})
+    assert misfit["ratio"] > 3.0  # with the "asymmetry" in: 4.6x worse than Preisach plain
+    assert kept["given_base"] is None
+    assert "caution: base gamma with its terms fits" in kept["headline"]
+    rep, full = analyse(runs, base_family="gamma", auto_families=families)
+    assert rep["verdict"] == "no_missing_effect" and rep["effects"] == []
+    assert rep["base_family"] == misfit["best_family"]
+    assert full["base_family"] == rep["base_family"]  # the plots show the answer's model
+    assert rep["given_base"]["base"] == "gamma"
+    assert rep["given_base"]["effects"] == [e["name"] for e in kept["effects"]]
+    assert "because the given base gamma, even with its terms" in rep["headline"]
+
+
+def test_a_base_that_only_lacked_the_effect_is_not_flagged(families: dict[str, Any]) -> None:
+    """A drift on the Gamma plant: plain, the thesis' Gamma (no offset) fits 2.4x worse than
+    the best family, which bends to the drift; with the drift term it fits best."""
+    runs = injected_runs("gamma", {"drift": 2.0})
+    rep, _ = analyse(runs, base_family="gamma", auto_families=families)
+    _, _, plain = choose_base(runs, families)
+    assert rep["summary"]["heldout_rmse_before"] > 2.0 * min(plain.values())
+    assert rep["base_misfit"] is None and rep["given_base"] is None
+    assert [e["name"] for e in rep["effects"]][:1] == ["drift"]
 
 
 def test_a_base_that_fits_is_not_flagged(families: dict[str, Any]) -> None:
