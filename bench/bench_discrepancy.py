@@ -137,9 +137,11 @@ def base_independence(cases: dict[str, dict[str, float]] | None = None) -> dict[
     with auto, and each base's agreement. Default cases: clean and every effect at strength 1.
 
     Two readings per base: ``first``, the given base's own answer (``base_check`` off), and
-    ``stage``, what the stage answers with its defaults: when that base with its terms fits
-    ``base_misfit_factor`` x worse held out than the best family plain, the best family's own
-    answer (``base_misfit_fallback``), taken from that family's row.
+    ``stage``, what the stage answers with its defaults (``base_misfit_fallback``): when that
+    base fits ``base_misfit_factor`` x worse plain than the best family, or its answer is
+    neither clean nor within ``base_retry_factor`` x the noise floor, and the best family's
+    model with its terms predicts ``workflow.min_relative_gain`` better than the base's with
+    its terms, the best family's answer, taken from that family's row.
 
     ``python -m bench.bench_discrepancy --bases`` runs it alone (about 25 min on 2 cores)."""
     from hydra import compose, initialize_config_dir
@@ -152,6 +154,8 @@ def base_independence(cases: dict[str, dict[str, float]] | None = None) -> dict[
         cfg = to_container(compose("discrepancy"))
     families = dict(cfg["auto_families"])
     factor = float(cfg["base_misfit_factor"])
+    min_gain = float(cfg["workflow"]["min_relative_gain"])
+    retry = float(cfg["base_retry_factor"])
     if cases is None:
         cases = {k: v for k, v in injector_cases().items()
                  if k == "clean" or k.endswith("@1")}
@@ -175,12 +179,20 @@ def base_independence(cases: dict[str, dict[str, float]] | None = None) -> dict[
                 named = [e["name"] for e in rep["effects"]]
                 row[base] = {"first": named[0] if named else None, "named": named,
                              "verdict": rep["verdict"],
+                             "heldout_rmse_before": rep["summary"]["heldout_rmse_before"],
                              "heldout_rmse_after": rep["summary"]["heldout_rmse_after"],
+                             "rmse_over_noise": rep["residual"]["rmse_over_noise"],
                              "seconds": round(time.perf_counter() - t0, 1)}
             _, _, plain = choose_base(runs, families)
             best = min(plain, key=plain.__getitem__)
             for base in BASES:
-                misfit = row[base]["heldout_rmse_after"] > factor * plain[best]
+                own = row[base]
+                unexplained = (own["verdict"] != "no_missing_effect"
+                               and own["rmse_over_noise"] > retry)
+                misfit = (base != best
+                          and (own["heldout_rmse_before"] > factor * plain[best] or unexplained)
+                          and row[best]["heldout_rmse_after"]
+                          < (1.0 - min_gain) * own["heldout_rmse_after"])
                 row[base]["misfit"] = bool(misfit)
                 row[base]["stage"] = row[best]["first"] if misfit else row[base]["first"]
             auto = row["auto"]["first"]

@@ -278,15 +278,17 @@ class DiscrepancyConfig:
     #: bases_tried lists them.
     max_bases: int = 2
     base_retry_factor: float = 1.5
-    #: With a base family given (not auto): also score the auto_families and flag the base
-    #: when its held-out RMSE is more than base_misfit_factor x the best one's (report:
-    #: base_misfit; the headline says so): the effects named may then stand in for the base's
-    #: misfit.
+    #: With a base family given (not auto): also score the auto_families plain and check the
+    #: base against the best of them (report: base_misfit; the headline says so): the effects
+    #: named on a base that cannot take the loop's shape may stand in for its misfit.
     base_check: bool = True
     base_misfit_factor: float = 1.5
-    #: A flagged base does not answer alone: the workflow runs again on the best-fitting
-    #: family, whose verdict and effects are the answer, and what the given base named is
-    #: kept beside it (report: given_base). false: the given base's answer, flagged only.
+    #: A base that fits base_misfit_factor x worse plain, or whose answer is neither clean nor
+    #: within base_retry_factor x the noise floor, does not answer alone: the workflow runs on
+    #: the best family too, which answers when its model with its terms predicts the held-out
+    #: runs workflow.min_relative_gain better (report: given_base keeps the given base's
+    #: answer). false: the given base's answer, flagged when even with its terms it fits
+    #: base_misfit_factor x worse than the best family plain.
     base_misfit_fallback: bool = True
     #: Excitation kinds used for identification when a run's manifest does not say its role
     #: (``excitation.role``); every other run is held out.
