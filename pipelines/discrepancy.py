@@ -312,11 +312,12 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
     wins plain and then leaves half of it, where the family that matches the mechanism plus
     the term explains it.
 
-    A given base that fits ``base_misfit_factor`` x worse held out than the best of
-    ``auto_families`` is flagged (``base_misfit``); with ``base_misfit_fallback`` the answer
-    then comes from the workflow on that best family, and the given base's own answer is kept
-    as ``given_base``: terms added to a base that cannot take the loop's shape stand in for the
-    base's misfit, so its answer would depend on the base and not on the source."""
+    A given base is checked against the best of ``auto_families`` (``base_check``): with
+    ``base_misfit_fallback`` by :func:`second_opinion` (the best family answers when its model
+    with its terms predicts clearly better; ``given_base`` keeps the given base's answer),
+    else by :func:`base_misfit` (flagged only). Terms added to a base that cannot take the
+    loop's shape stand in for the base's misfit, and the answer would depend on the base and
+    not on the source."""
     st = settings or WorkflowSettings()
     model_error = None
     if ukf_evidence:
@@ -377,10 +378,10 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
 
 
 def second_opinion(runs: list[RunData], report: dict[str, Any], full: dict[str, Any],
-                    workflow: Callable[[str, Mapping[str, Any]], dict[str, Any]],
-                    families: Mapping[str, Mapping[str, Any]], *, base: str,
-                    params: Mapping[str, Any], factor: float, retry_factor: float,
-                    min_gain: float) -> tuple[dict[str, Any], dict[str, Any]]:
+                   workflow: Callable[[str, Mapping[str, Any]], dict[str, Any]],
+                   families: Mapping[str, Mapping[str, Any]], *, base: str,
+                   params: Mapping[str, Any], factor: float, retry_factor: float,
+                   min_gain: float) -> tuple[dict[str, Any], dict[str, Any]]:
     """A given base checked against the best family plain (``base_misfit_fallback``).
 
     When the base fits ``factor`` x worse plain than the best family, or its answer is neither
