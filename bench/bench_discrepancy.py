@@ -148,7 +148,12 @@ def base_independence(cases: dict[str, dict[str, float]] | None = None) -> dict[
 
     from hysteresis.discrepancy.inject import PLANTS, injected_runs
     from pipelines.common import CONF_DIR, to_container
-    from pipelines.discrepancy import analyse, choose_base
+    from pipelines.discrepancy import (
+        analyse,
+        asks_best_family,
+        best_family_answers,
+        choose_base,
+    )
 
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = to_container(compose("discrepancy"))
@@ -187,12 +192,14 @@ def base_independence(cases: dict[str, dict[str, float]] | None = None) -> dict[
             best = min(plain, key=plain.__getitem__)
             for base in BASES:
                 own = row[base]
-                unexplained = (own["verdict"] != "no_missing_effect"
-                               and own["rmse_over_noise"] > retry)
-                misfit = (base != best
-                          and (own["heldout_rmse_before"] > factor * plain[best] or unexplained)
-                          and row[best]["heldout_rmse_after"]
-                          < (1.0 - min_gain) * own["heldout_rmse_after"])
+                asked = asks_best_family(
+                    {"verdict": own["verdict"],
+                     "residual": {"rmse_over_noise": own["rmse_over_noise"]}},
+                    plain_ratio=own["heldout_rmse_before"] / plain[best], factor=factor,
+                    retry_factor=retry)
+                misfit = (base != best and asked and best_family_answers(
+                    own["heldout_rmse_after"], row[best]["heldout_rmse_after"],
+                    min_gain=min_gain))
                 row[base]["misfit"] = bool(misfit)
                 row[base]["stage"] = row[best]["first"] if misfit else row[base]["first"]
             auto = row["auto"]["first"]

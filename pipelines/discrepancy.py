@@ -377,6 +377,22 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
     return report, full
 
 
+def asks_best_family(report: Mapping[str, Any], *, plain_ratio: float, factor: float,
+                     retry_factor: float) -> bool:
+    """Whether a given base's answer (``report``) is checked on the best family: the base
+    fits ``factor`` x worse plain (``plain_ratio``), or its answer is neither clean nor within
+    ``retry_factor`` x the noise floor."""
+    unexplained = (report["verdict"] != "no_missing_effect"
+                   and float(report["residual"]["rmse_over_noise"]) > retry_factor)
+    return plain_ratio > factor or unexplained
+
+
+def best_family_answers(own_after: float, best_after: float, *, min_gain: float) -> bool:
+    """Whether the best family's model with its terms predicts the held-out runs ``min_gain``
+    better than the given base's with its terms (held-out RMSEs after the terms)."""
+    return best_after < (1.0 - min_gain) * own_after
+
+
 def second_opinion(runs: list[RunData], report: dict[str, Any], full: dict[str, Any],
                    workflow: Callable[[str, Mapping[str, Any]], dict[str, Any]],
                    families: Mapping[str, Mapping[str, Any]], *, base: str,
@@ -401,13 +417,12 @@ def second_opinion(runs: list[RunData], report: dict[str, Any], full: dict[str, 
     own_plain = float(report["summary"]["heldout_rmse_before"])
     own_after = float(report["summary"]["heldout_rmse_after"])
     ratio = own_plain / scores[label] if scores[label] > 0 else float("inf")
-    unexplained = (report["verdict"] != "no_missing_effect"
-                   and float(report["residual"]["rmse_over_noise"]) > retry_factor)
-    if (best, best_params) == (base, dict(params)) or not (ratio > factor or unexplained):
+    if (best, best_params) == (base, dict(params)) or not asks_best_family(
+            report, plain_ratio=ratio, factor=factor, retry_factor=retry_factor):
         return report, full
     best_full = workflow(best, best_params)
     best_after = float(best_full["summary"]["heldout_rmse_after"])
-    if not best_after < (1.0 - min_gain) * own_after:
+    if not best_family_answers(own_after, best_after, min_gain=min_gain):
         return report, full
     given = {"base": base, "base_params": dict(params), "verdict": report["verdict"],
              "effects": [e["name"] for e in report["effects"]],
