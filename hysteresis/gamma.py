@@ -34,6 +34,8 @@ Brent's golden-section/parabolic method like Matlab's FMINBND).
 
 from __future__ import annotations
 
+import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, cast
@@ -217,8 +219,7 @@ class GammaModel(StatefulModel):
             cands = self._threshold_candidates(as_1d(u, "u"))
             p = cands[THRESHOLD_FRACTIONS.index(1.0 / 6.0)] if len(cands) > 1 else cands[0]
             return p, self._positions()[0]
-        best = self._best_fit(*check_pair(u, y))
-        return best[1], best[4]
+        return self._choose_setup(*check_pair(u, y))
 
     def start_outputs(self, u0: float, p: Any, position: float | None = None) -> FloatArray:
         """Every play's output before the first sample ``u0`` (see ``start_state``)."""
@@ -286,25 +287,28 @@ class GammaModel(StatefulModel):
         own start. Candidates are compared on the QR-reduced problem (a k x k least squares
         with the same minimiser); the chosen one is solved on the full record.
         """
-        spans = self._threshold_candidates(uu)
-        positions = self._positions()
-        u0 = float(uu[0])
-        if len(spans) > 1 or len(positions) > 1:
-            screened: list[tuple[float, int, float]] = []
-            for i, c in enumerate(spans):
-                scores = [self._screen(uu, yy, c, pos) for pos in positions]
-                k = int(np.argmin(scores))
-                if scores[k] > (1.0 - START_GAIN) * scores[0]:
-                    k = 0
-                screened.append((scores[k], i, positions[k]))
-            _, i, pos = min(screened)
-            p = spans[i]
-        else:
-            p, pos = spans[0], positions[0]
-        plays = play_matrix(uu, p, self._start(u0, p, pos))[0]
+        p, pos = self._choose_setup(uu, yy)
+        plays = play_matrix(uu, p, self._start(float(uu[0]), p, pos))[0]
         x, lam = self._solve(plays, yy)
         resid = self._design(plays) @ x - yy
         return float(resid @ resid), p, x, lam, pos
+
+    def _choose_setup(self, uu: FloatArray, yy: FloatArray) -> tuple[FloatArray, float]:
+        """(thresholds, start position) of the best candidate, screened on the QR-reduced
+        problem (see :meth:`_best_fit`); no solve on the full record."""
+        spans = self._threshold_candidates(uu)
+        positions = self._positions()
+        if len(spans) == 1 and len(positions) == 1:
+            return spans[0], positions[0]
+        screened: list[tuple[float, int, float]] = []
+        for i, c in enumerate(spans):
+            scores = [self._screen(uu, yy, c, pos) for pos in positions]
+            k = int(np.argmin(scores))
+            if scores[k] > (1.0 - START_GAIN) * scores[0]:
+                k = 0
+            screened.append((scores[k], i, positions[k]))
+        _, i, pos = min(screened)
+        return spans[i], pos
 
     def _screen(self, uu: FloatArray, yy: FloatArray, p: FloatArray, pos: float) -> float:
         """Squared error of the candidate (thresholds ``p``, start ``pos``), through the QR
@@ -500,9 +504,11 @@ def solve_play_weights(a: FloatArray, y: FloatArray, *, n_weights: int,
 
 
 def _check_thresholds(p: FloatArray) -> FloatArray:
-    if p.ndim != 1 or p.size == 0 or not np.all(np.isfinite(p)) or np.any(p < 0):
+    # plain Python on the handful of values: a fit checks them thousands of times in a search
+    values = p.tolist() if p.ndim == 1 else []
+    if not values or not all(math.isfinite(v) and v >= 0 for v in values):
         raise HysteresisError(f"thresholds must be finite and >= 0, got {p.tolist()}")
-    if np.unique(p).size != p.size:
+    if len(set(values)) != len(values):
         raise HysteresisError(f"thresholds must be distinct, got {p.tolist()}")
     return p
 
@@ -521,14 +527,24 @@ def constrained_lstsq(
     if cc == 0:
         raise HysteresisError("constraint vector is zero")
     x0 = d * c / cc
-    # Householder QR of c: the trailing columns of Q span its orthogonal complement.
-    qmat, _ = np.linalg.qr(c.reshape(-1, 1), mode="complete")
-    z_basis = qmat[:, 1:]
+    z_basis = _null_space_basis(np.ascontiguousarray(c, dtype=np.float64).tobytes())
     z, *_ = np.linalg.lstsq(a @ z_basis, y - a @ x0, rcond=None)
     x = x0 + z_basis @ z
     grad = a.T @ (a @ x - y)
     lam = -float(c @ grad) / cc
     return x, lam
+
+
+@functools.lru_cache(maxsize=64)
+def _null_space_basis(c_bytes: bytes) -> FloatArray:
+    """An orthonormal basis of the constraint vector's null space: the trailing columns of
+    the Householder QR of ``c``. Cached: a discrepancy search solves thousands of problems
+    with the same few constraint vectors, and the QR call costs as much as the solve."""
+    c = np.frombuffer(c_bytes, dtype=np.float64)
+    qmat, _ = np.linalg.qr(c.reshape(-1, 1), mode="complete")
+    z_basis = np.ascontiguousarray(qmat[:, 1:])
+    z_basis.setflags(write=False)
+    return z_basis
 
 
 def seed001_table41() -> list[dict[str, Any]]:

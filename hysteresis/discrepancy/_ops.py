@@ -57,6 +57,36 @@ def scaled_play(u: FloatArray, half_width: FloatArray, *, z0: float) -> FloatArr
     return np.asarray(_scaled_play(uu, hh, float(z0)), dtype=np.float64)
 
 
+@njit(cache=True)
+def _scaled_play_bank(u: Any, f: Any, p: Any, w0: Any) -> Any:  # pragma: no cover - compiled
+    out = np.empty((u.size, p.size))
+    for i in range(p.size):
+        half = 0.5 * p[i]
+        z = w0[i] + half
+        for k in range(u.size):
+            h = half * f[k]
+            if u[k] - h > z:
+                z = u[k] - h
+            elif u[k] + h < z:
+                z = u[k] + h
+            out[k, i] = z - half
+    return out
+
+
+def scaled_play_bank(u: FloatArray, factor: FloatArray, thresholds: FloatArray,
+                     start: FloatArray) -> FloatArray:
+    """Gamma play operators with time-scaled thresholds, one column per threshold ``p_i``:
+    ``scaled_play(u, p_i f / 2, z0=w_i + p_i / 2) - p_i / 2`` from the start outputs ``w_i``
+    (with ``f = 1`` exactly ``min(u, max(u - p_i, w))``), in one compiled pass."""
+    uu = np.ascontiguousarray(u, dtype=np.float64)
+    ff = np.ascontiguousarray(factor, dtype=np.float64)
+    pp = np.ascontiguousarray(thresholds, dtype=np.float64)
+    ww = np.ascontiguousarray(start, dtype=np.float64)
+    if ff.shape != uu.shape or np.any(ff < 0) or np.any(pp < 0) or ww.shape != pp.shape:
+        raise ValueError("factor must be >= 0 and as long as u; thresholds >= 0, one start each")
+    return np.asarray(_scaled_play_bank(uu, ff, pp, ww), dtype=np.float64)
+
+
 def smooth(x: FloatArray, window: int) -> FloatArray:
     """Centred moving average with edge replication (window forced odd, >= 1)."""
     w = max(1, int(window)) | 1

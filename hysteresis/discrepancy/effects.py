@@ -23,7 +23,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from hysteresis.base import HysteresisError, HysteresisModel
-from hysteresis.discrepancy._ops import FloatArray, play, scaled_play, shift
+from hysteresis.discrepancy._ops import FloatArray, play, scaled_play, scaled_play_bank, shift
 from hysteresis.discrepancy.runs import RunData
 from hysteresis.lag import delay_grid
 
@@ -185,6 +185,11 @@ class TendonElongation(Effect):
     n_theta = 3
     #: Play thresholds averaged over the friction path (the profile's quadrature).
     n_profile = 8
+    #: Profiles kept for the refinement of c (a run's few (R, w) points).
+    n_cached_profiles = 16
+
+    def __init__(self) -> None:
+        self._profiles: dict[tuple[Any, ...], tuple[FloatArray, FloatArray]] = {}
 
     def available(self, run: RunData) -> bool:
         return run.tension is not None
@@ -202,9 +207,26 @@ class TendonElongation(Effect):
         """The tendon's T^2 profile, from 0 at the run's start, per unit of the largest T^2."""
         if run.tension is None:
             raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
-        lt = np.log(np.maximum(run.tension, ctx["t_floor"]))
+        if friction is not None:
+            return self._profile(run.tension, big_r, w, ctx, friction)
+        # The search refines the stretch c with (R, w) fixed: the profile does not depend on
+        # c, so the last few are kept (keyed by the tension array itself, held alive here).
+        key = (id(run.tension), float(big_r), float(w), tuple(sorted(ctx.items())))
+        hit = self._profiles.get(key)
+        if hit is not None and hit[0] is run.tension:
+            return hit[1]
+        out = self._profile(run.tension, big_r, w, ctx, None)
+        out.setflags(write=False)
+        self._profiles[key] = (run.tension, out)
+        while len(self._profiles) > self.n_cached_profiles:
+            self._profiles.pop(next(iter(self._profiles)))
+        return out
+
+    def _profile(self, tension: FloatArray, big_r: float, w: float, ctx: Ctx,
+                 friction: FloatArray | None) -> FloatArray:
+        lt = np.log(np.maximum(tension, ctx["t_floor"]))
         near = np.exp(2.0 * lt)
-        path = np.zeros(run.n)
+        path = np.zeros(tension.size)
         for r in np.linspace(0.0, big_r * ctx["log_span"], self.n_profile):
             # Tension at one point of the friction path (capstan: a play in log tension). A
             # speed law scales the friction all along the tendon, so the path with it.
@@ -416,29 +438,29 @@ class ComposedModel:
             self._gamma = is_gamma(self.base_factory())
         return self._gamma
 
-    def _scaled_design(self, run: RunData, base: HysteresisModel) -> FloatArray:
+    def _scaled_design(self, run: RunData, base: HysteresisModel,
+                       setup: tuple[FloatArray, float] | None = None) -> FloatArray:
         """The Gamma base's play-operator columns with time-varying thresholds.
 
         Column i is ``w_i = play_{p_i f(t) / 2}(u) - p_i / 2``: with ``f = 1`` exactly the Gamma
         operator ``min(u, max(u - p_i, w))`` from the zero state; ``f`` is the product of the
-        operator terms' friction factors.
+        operator terms' friction factors. ``setup``: the base's (thresholds, start position)
+        on ``run`` when the caller has them (else the fitted ones, else the base's choice).
         """
         f = self._friction(run)
         u = self._input(run, f)
         if f is None:
             f = np.ones(run.n)
-        if hasattr(self, "op_thresholds_"):
+        if setup is not None:
+            p, pos = setup
+        elif hasattr(self, "op_thresholds_"):
             p, pos = self.op_thresholds_, self.op_start_position_
         else:
             p, pos = _gamma_setup(base, run)
         u0 = float(u[0])
-        start = base.start_outputs(u0, p, pos)  # type: ignore[attr-defined]
-        cols = []
-        for pi, si in zip(p, start, strict=True):
-            w0 = min(u0, max(u0 - float(pi), float(si)))
-            cols.append(scaled_play(u, 0.5 * float(pi) * f, z0=w0 + 0.5 * float(pi))
-                        - 0.5 * float(pi))
-        a = np.column_stack(cols)
+        start = np.asarray(base.start_outputs(u0, p, pos),  # type: ignore[attr-defined]
+                           dtype=np.float64)
+        a = scaled_play_bank(u, f, p, np.minimum(u0, np.maximum(u0 - p, start)))
         if getattr(base, "fit_offset", False):
             a = np.column_stack([a, np.ones(run.n)])
         return a
@@ -459,8 +481,9 @@ class ComposedModel:
         base = self.base_factory()
         for stale in ("op_thresholds_", "op_start_position_", "op_weights_"):
             self.__dict__.pop(stale, None)
-        a = self._scaled_design(run, base)
-        n_w = int(_gamma_setup(base, run)[0].size)
+        setup = _gamma_setup(base, run)
+        a = self._scaled_design(run, base, setup)
+        n_w = int(setup[0].size)
         uses_base = any(t.effect.uses_base for t in self.terms if t.effect.n_linear > 0)
         yb = run.y
         x = np.zeros(a.shape[1])
@@ -473,7 +496,7 @@ class ComposedModel:
             yb = a @ x[: a.shape[1]]
             coef = x[a.shape[1]:]
         self.base_ = base
-        self.op_thresholds_, self.op_start_position_ = _gamma_setup(base, run)
+        self.op_thresholds_, self.op_start_position_ = setup
         self.op_weights_ = np.asarray(x[: a.shape[1]], dtype=np.float64)
         self.coef_ = np.asarray(x[a.shape[1]:], dtype=np.float64)
         return self

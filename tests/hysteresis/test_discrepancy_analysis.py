@@ -14,7 +14,7 @@ import pytest
 
 import hysteresis.discrepancy.locate as L
 from hysteresis.base import HysteresisError, make_family
-from hysteresis.discrepancy._ops import play, scaled_play, shift
+from hysteresis.discrepancy._ops import play, scaled_play, scaled_play_bank, shift
 from hysteresis.discrepancy.bases import AffineModel, PlaySumModel
 from hysteresis.discrepancy.effects import (
     CANDIDATES,
@@ -279,6 +279,28 @@ def test_scaled_play_holds_when_widening_and_pulls_when_narrowing():
     assert np.allclose(z, [0.0, 0.0, 1.0, 1.5, 1.5])
     with pytest.raises(ValueError, match="half_width"):
         scaled_play(u, -np.ones(5), z0=0.0)
+
+
+def test_the_play_bank_is_the_gamma_operators_and_their_scaled_plays_column_by_column():
+    rng = np.random.default_rng(4)
+    u = np.cumsum(rng.normal(0.0, 0.3, 400))
+    p = np.array([0.0, 0.4, 1.1, 2.5])
+    start = u[0] - 0.5 * p
+    # f = 1: the Gamma family's operators from the same start (to rounding)
+    a = scaled_play_bank(u, np.ones(u.size), p, start)
+    w, plays = start.copy(), []
+    for x in u:
+        w = np.minimum(x, np.maximum(x - p, w))
+        plays.append(w.copy())
+    assert np.allclose(a, np.array(plays), rtol=0.0, atol=1e-12)
+    # any factor: each column the scaled play of half-width p f / 2, shifted by p / 2
+    f = 1.0 + np.abs(rng.normal(0.0, 0.5, u.size))
+    b = scaled_play_bank(u, f, p, start)
+    for i, pi in enumerate(p):
+        col = scaled_play(u, 0.5 * pi * f, z0=start[i] + 0.5 * pi) - 0.5 * pi
+        assert np.array_equal(b[:, i], col)
+    with pytest.raises(ValueError, match="factor"):
+        scaled_play_bank(u, -f, p, start)
 
 
 def test_rate_dependence_scales_a_gamma_bases_play_operators():
