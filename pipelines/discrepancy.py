@@ -224,6 +224,19 @@ def _breaks(starts: Sequence[int]) -> Callable[[Any], npt.NDArray[np.float64]]:
     return cut
 
 
+def _fixed_margins(fig: Any, rows: int, *, left: float = 0.75, right: float = 0.15,
+                   bottom: float = 0.5, top: float = 0.7, row_gap: float = 0.8,
+                   col_gap: float = 0.7) -> None:
+    """Margins and gaps in inches (tick labels, axis labels, the titles and the suptitle's
+    strip) whatever the number of rows. A measured layout (tight_layout) draws every figure
+    once more and took as long as the discrepancy analysis itself."""
+    w, h = fig.get_figwidth(), fig.get_figheight()
+    axes_h = (h - bottom - top - (rows - 1) * row_gap) / rows
+    axes_w = (w - left - right - col_gap) / 2
+    fig.subplots_adjust(left=left / w, right=1.0 - right / w, bottom=bottom / h,
+                        top=1.0 - top / h, hspace=row_gap / axes_h, wspace=col_gap / axes_w)
+
+
 def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
     """Before/after loops and residuals per held-out run, located segments shaded."""
     import matplotlib
@@ -264,8 +277,7 @@ def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
             ax[1].legend(fontsize=7)
         names = [e["name"] for e in report["effects"]] or ["no missing effect"]
         fig.suptitle(f"{report['base_family']} + {', '.join(names)} | {g.key}", fontsize=10)
-        # Keep a 0.4 inch strip for the suptitle whatever the number of rows.
-        fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - 0.4 / fig.get_figheight()))
+        _fixed_margins(fig, len(runs))
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in g.key)
         path = contained(out_dir, f"discrepancy_{safe}.png")
         with atomic_path(path, suffix=".png") as tmp:
