@@ -61,7 +61,7 @@ pipeline: $(STAMP)
 	$(PY) -m pipelines.run_all $(ARGS)
 
 test: $(STAMP)
-	$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/team
+	$(PY) -m pytest -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/team
 
 # the inner loop: everything but the tests marked slow (simulated campaigns, subprocess kills)
 test-fast: $(STAMP)
