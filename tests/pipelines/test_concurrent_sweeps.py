@@ -1,5 +1,10 @@
 """Two sweeps started at the same moment on a fresh store: separate sweep folders, separate
-parents, one schema migration (serialised by the store lock), no RUNNING run left."""
+parents, one schema migration (serialised by the store lock), no RUNNING run left.
+
+The sweeps run their jobs in-process (Hydra's basic launcher): what races here is the sweeps'
+own start (folder, parent run, schema), which every launcher shares; the joblib pool's jobs
+landing under one parent are checked by test_sweep, and each pool worker here would only add
+another import of the whole stack."""
 
 from __future__ import annotations
 
@@ -21,7 +26,8 @@ def test_two_sweeps_started_together_never_share_a_folder_or_race_the_store(
                                kinds=("sine_decay",)), tmp_path)
     assert not (tmp_path / "mlflow.db").exists()  # both processes find no store
     cmd = [sys.executable, "-m", "pipelines.fit", "-m", "families=[linear]",
-           "config.curve_angle_deg=15,90", f"paths.root={tmp_path}", "progress=false"]
+           "config.curve_angle_deg=15,90", f"paths.root={tmp_path}", "progress=false",
+           "hydra/launcher=basic"]
     env = {**os.environ, "HYDRA_FULL_ERROR": "1", "MPLBACKEND": "Agg"}
     for var in ("TSM_MLFLOW_PARENT_RUN_ID", "TSM_SWEEP_ID"):
         env.pop(var, None)
