@@ -16,6 +16,7 @@ from hysteresis.coleman_hodgdon import ColemanHodgdonModel
 from hysteresis.compensation import sine_profile
 from pipelines import compensate
 from pipelines.compensate import RigBackend, table42_wide
+from tests.pipelines.pipeline_data import mlflow_store
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
 
@@ -120,6 +121,7 @@ def test_quick_run_writes_every_table_report_and_plot(tmp_path: Path) -> None:
 
 
 def test_run_logs_tables_and_metrics_to_mlflow(tmp_path: Path) -> None:
+    mlflow_store(tmp_path)  # an initialised store: the migrations are not what is tested
     cfg = _cfg(tmp_path, "tracking=local", "plots=false", "seed001.enabled=false",
                "seed002.enabled=false")
     compensate.run(cfg, backend=BACKEND)

@@ -12,6 +12,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from pipelines.discrepancy import DiscrepancyError, run
+from tests.pipelines.pipeline_data import mlflow_store
 
 REPO = Path(__file__).resolve().parents[2]
 REPORT_KEYS = {"base_family", "verdict", "effects", "located"}
@@ -56,7 +57,7 @@ def raw_source(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_stage_names_the_hidden_effect_from_raw_run_folders(raw_source: Path, tmp_path: Path):
     before = sorted(p.relative_to(raw_source) for p in raw_source.rglob("*"))
     out = tmp_path / "reports" / "discrepancy.json"
-    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    uri = f"sqlite:///{mlflow_store(tmp_path)}"  # initialised: migrations are not tested here
     rep = run(cfg(raw_source, out, base_family="gamma",
                   tracking={"enabled": True, "uri": uri,
                             "artifact_location": (tmp_path / "art").as_uri(),

@@ -10,6 +10,7 @@ from hydra import compose, initialize_config_dir
 
 from pipelines import discrepancy_study as study
 from pipelines.common import CONF_DIR, to_container
+from tests.pipelines.pipeline_data import mlflow_store
 
 # the detection study end to end: `make test-fast` leaves these out
 pytestmark = pytest.mark.slow
@@ -133,6 +134,7 @@ def test_shortfalls_name_each_expectation_the_study_missed() -> None:
 def test_one_hidden_effect_end_to_end_logged_and_checked(tmp_path: Path) -> None:
     import mlflow
 
+    mlflow_store(tmp_path)  # an initialised store: the migrations are not what is tested
     # one effect, one combination, and an expectation the effect's case cannot meet: the
     # stage writes and logs its tables, then fails naming the case
     cfg = _cfg(tmp_path, tracking="local", effects_selected=["time_delay"],
