@@ -15,7 +15,9 @@ joint fit. :class:`ComposedModel` is base family + terms, fitted jointly by back
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -643,6 +645,24 @@ def _sse(model: ComposedModel, run: RunData) -> float:
     return float(np.sum((run.y - model.predict(run)) ** 2))
 
 
+#: The fits of the current :func:`memoised_fits` block (None: outside one, nothing is kept).
+_FITS: ContextVar[dict[Any, ComposedModel] | None] = ContextVar("discrepancy_fits", default=None)
+
+
+@contextmanager
+def memoised_fits() -> Iterator[None]:
+    """Within the block, :func:`fit_with_effect` hands back the model it already fitted for the
+    same base factory, earlier terms, effect and identification run: a workflow's later rounds
+    (:func:`fit_joint` fits each candidate alone again) and its pair search repeat about a
+    sixth of its fits. The models are fitted once and never refitted, so sharing them is
+    safe; the block bounds how long they are kept."""
+    token = _FITS.set({})
+    try:
+        yield
+    finally:
+        _FITS.reset(token)
+
+
 def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect,
                     ident: RunData, *, refine: bool = True,
                     iterations: int = 8) -> ComposedModel:
@@ -651,6 +671,26 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
     The effect's nonlinear parameter is chosen by a grid search on the identification SSE,
     refined by a bounded scalar search between the grid neighbours of the best point.
     """
+    fits = _FITS.get()
+    if fits is None:
+        return _fit_with_effect(base_factory, fixed, effect, ident, refine=refine,
+                                iterations=iterations)
+    # objects by identity (the memo holds them, so no id is reused), parameters by value
+    key = (base_factory, effect, ident, refine, iterations,
+           tuple((t.effect, t.theta, t.ctx) for t in fixed))
+    try:
+        hit = fits.get(key)
+    except TypeError:  # an unhashable factory or parameter: fitted, not kept
+        return _fit_with_effect(base_factory, fixed, effect, ident, refine=refine,
+                                iterations=iterations)
+    if hit is None:
+        hit = fits[key] = _fit_with_effect(base_factory, fixed, effect, ident, refine=refine,
+                                           iterations=iterations)
+    return hit
+
+
+def _fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect,
+                     ident: RunData, *, refine: bool, iterations: int) -> ComposedModel:
     ctx = tuple(sorted(effect.context(ident).items()))
     # A slow base (Bouc-Wen, Coleman-Hodgdon, Preisach: an iterative fit) searches the
     # effect's parameter with its fast screening base and is fitted once, at the chosen value.

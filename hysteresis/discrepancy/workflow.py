@@ -39,6 +39,7 @@ from hysteresis.discrepancy.effects import (
     Term,
     fit_joint,
     fit_with_effect,
+    memoised_fits,
 )
 from hysteresis.discrepancy.evidence import corroboration
 from hysteresis.discrepancy.locate import autocorrelation, locate
@@ -325,7 +326,7 @@ def run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_nam
                  model_error: dict[str, FloatArray] | None = None) -> dict[str, Any]:
     """The whole workflow (see :func:`_run_workflow`), BLAS pinned to one thread: the problems
     are thousands of tiny least-squares solves where threads only add contention."""
-    with single_thread_blas():
+    with single_thread_blas(), memoised_fits():
         return _run_workflow(runs, base_factory, base_name=base_name, settings=settings,
                              model_error=model_error)
 

@@ -25,6 +25,7 @@ from hysteresis.discrepancy.effects import (
     candidate,
     fit_joint,
     fit_with_effect,
+    memoised_fits,
     retune,
     speed,
 )
@@ -167,6 +168,27 @@ def test_dead_zone_term_recovers_the_width():
     assert m2.terms[0].theta == pytest.approx(0.5, rel=0.05)
     assert np.sqrt(np.mean((r2.y - m2.predict(r2)) ** 2)) < 0.01
     assert np.sqrt(np.mean((r.y - m.predict(r)) ** 2)) < np.std(r.y) * 0.2
+
+
+def test_memoised_fits_hand_back_the_same_fit_within_the_block_only():
+    r = run(y=lambda t, u: 0.9 * play(u, 0.25, z0=0.0) + 0.1)
+    dz, delay = candidate("dead_zone"), candidate("time_delay")
+    alone = fit_with_effect(AffineModel, [], dz, r)
+    with memoised_fits():
+        m = fit_with_effect(AffineModel, [], dz, r)
+        assert fit_with_effect(AffineModel, [], dz, r) is m
+        # any difference in the call is another fit: the run, the effect, the earlier terms
+        r2 = replace(r, run_id="other")
+        assert fit_with_effect(AffineModel, [], dz, r2) is not m
+        assert fit_with_effect(AffineModel, [], delay, r) is not m
+        on_top = fit_with_effect(AffineModel, m.terms, delay, r)
+        assert fit_with_effect(AffineModel, m.terms, delay, r) is on_top
+        assert fit_with_effect(AffineModel, alone.terms, delay, r) is on_top  # same terms
+        assert fit_with_effect(AffineModel, [Term(dz, 0.3, m.terms[0].ctx)], delay,
+                               r) is not on_top
+    # the same fit as without the memo, and nothing kept after the block
+    assert m.terms == alone.terms and np.array_equal(m.predict(r), alone.predict(r))
+    assert fit_with_effect(AffineModel, [], dz, r) is not m
 
 
 def test_drift_term_recovers_the_creep_and_extrapolates():
