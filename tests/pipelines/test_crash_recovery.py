@@ -58,7 +58,9 @@ STAGES: dict[str, list[str]] = {
     # the papers' compensation experiments (the smoke size, shorter profiles: what is killed
     # and recovered is the stage's writing, not the length of its runs), on the virtual rig
     "compensate": ["pipelines.compensate", "experiment=compensation_quick", "plots=false",
-                   "seed002.duration_s=4.0", "seed001.profiles={mixed:4.0,sine:4.0,triangle:3.0}"],
+                   "seed002.duration_s=2.0", "seed001.profiles={mixed:2.0,sine:2.0,triangle:2.0}",
+                   "seed000.tracking.duration_s=5.0",
+                   "seed000.ga={maxiter:3,popsize:4,max_samples:200}"],
     # the champions' registration runs at the end of a pipeline that fitted and validated
     "registry": ["pipelines.run_all", "stages=[fit,validate]", "n_jobs=1",
                  "tracking.registry.enabled=true", 'overrides.fit=["families=[linear,gamma]"]'],

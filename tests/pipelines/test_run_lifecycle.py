@@ -75,7 +75,8 @@ def test_a_sweep_with_a_failing_job_leaves_no_run_running(tmp_path: Path) -> Non
     proc = subprocess.run(
         [sys.executable, "-m", "pipelines.fit", "-m", "families=[linear]",
          "config.curve_angle_deg=15,33", f"paths.root={tmp_path}", "progress=false",
-         f"hydra.sweep.dir={tmp_path}/multirun"],  # no 33 deg data: that job fails
+         f"hydra.sweep.dir={tmp_path}/multirun",  # no 33 deg data: that job fails
+         "hydra.launcher.n_jobs=1"],  # the pool's failure path; a second worker adds nothing
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode != 0 and "no configuration matches" in proc.stderr
     client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
