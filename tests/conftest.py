@@ -9,21 +9,25 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
-#: The files that take longest (seconds on 2 cores), longest first. `make test` runs a file
-#: on one worker (``--dist loadfile``) and hands the files out in collection order, so
-#: starting with the longest lets the short ones fill in around them and both workers finish
-#: together.
+#: The files that take longest (seconds on 2 cores), longest first. `make test` runs
+#: a file on one worker (``--dist loadfile``) and, with ``--no-loadscope-reorder``, hands the
+#: files out in collection order (xdist would otherwise sort them by their number of tests and
+#: start the one-test crash and sweep files last), so starting with the longest lets the short
+#: ones fill in around them and both workers finish together.
 LONGEST_FIRST = (
-    "hysteresis/test_discrepancy_rig.py",  # ~90-120 s
-    "pipelines/test_crash_recovery.py",  # ~40-60 s
-    "pipelines/test_concurrent_sweeps.py",
-    "pipelines/test_discrepancy_base_check.py",
+    "hysteresis/test_discrepancy_rig.py",  # ~65-90 s
+    "pipelines/test_crash_recovery.py",  # ~40-90 s: which stages are killed is random
+    "pipelines/test_sweep.py",  # ~30-40 s
+    "pipelines/test_config_composition.py",  # ~25-30 s
     "pipelines/test_discrepancy_pipeline.py",
-    "pipelines/test_run_lifecycle.py",
-    "pipelines/test_config_composition.py",
+    "pipelines/test_discrepancy_base_check.py",
+    "pipelines/test_concurrent_sweeps.py",
     "pipelines/test_discrepancy_study.py",
-    "pipelines/test_sweep.py",
+    "pipelines/test_end_to_end.py",
     "pipelines/test_compensate.py",
+    "hysteresis/test_compensation.py",
+    "pipelines/test_generate.py",
+    "pipelines/test_run_lifecycle.py",
 )
 
 
