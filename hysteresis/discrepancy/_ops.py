@@ -62,14 +62,7 @@ def _scaled_play_bank(u: Any, f: Any, p: Any, w0: Any) -> Any:  # pragma: no cov
     out = np.empty((u.size, p.size))
     for i in range(p.size):
         half = 0.5 * p[i]
-        z = w0[i] + half
-        for k in range(u.size):
-            h = half * f[k]
-            if u[k] - h > z:
-                z = u[k] - h
-            elif u[k] + h < z:
-                z = u[k] + h
-            out[k, i] = z - half
+        out[:, i] = _scaled_play(u, half * f, w0[i] + half) - half
     return out
 
 
