@@ -9,6 +9,13 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
+# Two test workers share two cores, and every stage the tests start is a process of its own:
+# a BLAS pool of one thread per core in each of them only oversubscribes the cores (OpenBLAS
+# threads spin while they wait). Set before the workers and their subprocesses start; a value
+# the caller set is kept.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 #: The files that take longest (seconds on 2 cores), longest first. `make test` runs
 #: a file on one worker (``--dist loadfile``) and, with ``--no-loadscope-reorder``, hands the
 #: files out in collection order (xdist would otherwise sort them by their number of tests and

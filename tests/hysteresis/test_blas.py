@@ -2,9 +2,21 @@
 
 from __future__ import annotations
 
-from threadpoolctl import threadpool_info
+from collections.abc import Iterator
+
+import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
 
 from hysteresis._blas import single_thread_blas
+
+
+@pytest.fixture(autouse=True)
+def two_blas_threads() -> Iterator[None]:
+    """Start from two BLAS threads (the test session runs with one), so that a limit that
+    did nothing, or a restore that did not happen, shows."""
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert set(_blas_threads()) == {2}
+        yield
 
 
 def _blas_threads() -> list[int]:
