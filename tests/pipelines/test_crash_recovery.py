@@ -58,7 +58,10 @@ STAGES: dict[str, list[str]] = {
     # the papers' compensation experiments (the smoke size, shorter profiles: what is killed
     # and recovered is the stage's writing, not the length of its runs), on the virtual rig
     "compensate": ["pipelines.compensate", "experiment=compensation_quick", "plots=false",
-                   "seed002.duration_s=2.0", "seed001.profiles={mixed:2.0,sine:2.0,triangle:2.0}",
+                   "seed002.duration_s=2.0", "seed001.profiles={mixed:1.0}",
+                   "seed001.families=[gamma]", "seed001.shape_aware.curve_angles_deg=[15,75]",
+                   "seed001.timing.steps={exact:20,bounded:5,nelder-mead:2,slsqp:2,"
+                   "interior-point:1}",
                    "seed000.tracking.duration_s=5.0",
                    "seed000.ga={maxiter:3,popsize:4,max_samples:200}"],
     # the champions' registration runs at the end of a pipeline that fitted and validated
