@@ -38,6 +38,8 @@ $(STAMP): requirements.lock pyproject.toml
 	$(PY) -m pip install --quiet -r requirements.lock
 	# The repository itself goes on sys.path through a .pth file (no build backend needed).
 	$(PY) -c 'import site,sys; open(site.getsitepackages()[0]+"/tsm_hysteresis.pth","w").write(sys.argv[1]+"\n")' $(CURDIR)
+	# compile the numba kernels into the cache once, not in every parallel worker later
+	$(PY) -m pipelines.compile_kernels
 	touch $(STAMP)
 
 venv: $(STAMP)

@@ -131,3 +131,17 @@ def test_hydra_family_config_instantiates_the_default_model(name: str) -> None:
     assert type(model) is family_class(name)
     assert model.get_params() == family_class(name)().get_params()
     assert set(cfg.keys()) - {"_target_"} == set(model.get_params())
+
+
+def test_as_1d_gives_the_kernels_one_array_type() -> None:
+    from hysteresis.base import as_1d
+
+    frozen = np.linspace(0.0, 1.0, 8)
+    frozen.setflags(write=False)
+    for x in (frozen, np.linspace(0.0, 1.0, 16)[::2], [0, 1, 2]):
+        a = as_1d(x, "u")
+        assert a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable
+        assert np.array_equal(a, np.asarray(x, dtype=np.float64))
+    assert not frozen.flags.writeable  # the caller's array is left as it was
+    plain = np.linspace(0.0, 1.0, 8)
+    assert as_1d(plain, "u") is plain  # no copy when none is needed
