@@ -87,7 +87,7 @@ def as_1d(x: Any, name: str) -> FloatArray:
     """Validate and convert an input signal to a finite 1-D float64 array, C-contiguous and
     writeable: the compiled kernels then see one array type, and compile once instead of once
     more for each read-only or strided view they are handed."""
-    arr = np.require(x, dtype=np.float64, requirements=["C_CONTIGUOUS", "WRITEABLE"])
+    arr = np.require(x, dtype=np.float64, requirements=["C_CONTIGUOUS", "WRITEABLE", "ENSUREARRAY"])
     if arr.ndim != 1:
         raise HysteresisError(f"{name} must be 1-D, got shape {arr.shape}")
     if arr.size == 0:

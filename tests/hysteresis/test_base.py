@@ -138,9 +138,10 @@ def test_as_1d_gives_the_kernels_one_array_type() -> None:
 
     frozen = np.linspace(0.0, 1.0, 8)
     frozen.setflags(write=False)
-    for x in (frozen, np.linspace(0.0, 1.0, 16)[::2], [0, 1, 2]):
+    for x in (frozen, np.linspace(0.0, 1.0, 16)[::2], [0, 1, 2], np.ma.masked_array([1.0, 2.0])):
         a = as_1d(x, "u")
-        assert a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable
+        assert type(a) is np.ndarray and a.dtype == np.float64
+        assert a.flags.c_contiguous and a.flags.writeable
         assert np.array_equal(a, np.asarray(x, dtype=np.float64))
     assert not frozen.flags.writeable  # the caller's array is left as it was
     plain = np.linspace(0.0, 1.0, 8)
