@@ -96,8 +96,7 @@ def dispatchers(module: ModuleType) -> dict[str, Any]:
             and v.targetoptions.get("inline") != "always"}
 
 
-def main(argv: list[str] | None = None) -> int:
-    del argv
+def main() -> int:
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=len(HALVES)) as pool:
         seconds = list(pool.map(_run, HALVES))

@@ -671,21 +671,22 @@ def fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: Ef
     The effect's nonlinear parameter is chosen by a grid search on the identification SSE,
     refined by a bounded scalar search between the grid neighbours of the best point.
     """
-    fits = _FITS.get()
-    if fits is None:
+    def fit() -> ComposedModel:
         return _fit_with_effect(base_factory, fixed, effect, ident, refine=refine,
                                 iterations=iterations)
+
+    fits = _FITS.get()
+    if fits is None:
+        return fit()
     # objects by identity (the memo holds them, so no id is reused), parameters by value
     key = (base_factory, effect, ident, refine, iterations,
            tuple((t.effect, t.theta, t.ctx) for t in fixed))
     try:
         hit = fits.get(key)
     except TypeError:  # an unhashable factory or parameter: fitted, not kept
-        return _fit_with_effect(base_factory, fixed, effect, ident, refine=refine,
-                                iterations=iterations)
+        return fit()
     if hit is None:
-        hit = fits[key] = _fit_with_effect(base_factory, fixed, effect, ident, refine=refine,
-                                           iterations=iterations)
+        hit = fits[key] = fit()
     return hit
 
 
