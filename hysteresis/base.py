@@ -17,6 +17,7 @@ from __future__ import annotations
 import functools
 import inspect
 import json
+import math
 from collections.abc import Sequence
 from typing import Any, ClassVar, TypeVar
 
@@ -87,12 +88,19 @@ def as_1d(x: Any, name: str) -> FloatArray:
     """Validate and convert an input signal to a finite 1-D float64 array, C-contiguous and
     writeable: the compiled kernels then see one array type, and compile once instead of once
     more for each read-only or strided view they are handed."""
-    arr = np.require(x, dtype=np.float64, requirements=["C_CONTIGUOUS", "WRITEABLE", "ENSUREARRAY"])
+    if (type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous
+            and x.flags.writeable):
+        arr = x  # already what np.require would hand back, without its overhead
+    else:
+        arr = np.require(x, dtype=np.float64,
+                         requirements=["C_CONTIGUOUS", "WRITEABLE", "ENSUREARRAY"])
     if arr.ndim != 1:
         raise HysteresisError(f"{name} must be 1-D, got shape {arr.shape}")
     if arr.size == 0:
         raise HysteresisError(f"{name} is empty")
-    if not np.all(np.isfinite(arr)):
+    # a finite sum means every value is finite (one pass, no temporary); only an overflowing
+    # sum of finite values needs the element-wise check
+    if not math.isfinite(float(arr.sum())) and not np.all(np.isfinite(arr)):
         bad = int(np.flatnonzero(~np.isfinite(arr))[0])
         raise HysteresisError(f"{name} has a non-finite value at index {bad}")
     return arr
@@ -228,7 +236,7 @@ class HysteresisModel:
 
     @property
     def is_fitted(self) -> bool:
-        return bool(self.fitted_attributes())
+        return any(k.endswith("_") and not k.startswith("_") for k in vars(self))
 
     def check_fitted(self) -> None:
         if not self.is_fitted:

@@ -207,7 +207,8 @@ class GammaModel(StatefulModel):
                 raise HysteresisError(
                     f"threshold_fraction must be > 0, got {self.threshold_fraction}")
             tops = [f * span for f in fractions]
-        return [_check_thresholds(np.linspace(0.0, top, int(self.n_operators))) for top in tops]
+        # copies: a fitted model owns its thresholds
+        return [g.copy() for g in _play_grids(tuple(tops), int(self.n_operators))]
 
     def play_setup(self, u: Any, y: Any = None) -> tuple[FloatArray, float]:
         """(thresholds, start position) a fit on ``(u, y)`` uses: the fitted ones; else the
@@ -501,6 +502,13 @@ def solve_play_weights(a: FloatArray, y: FloatArray, *, n_weights: int,
         c = np.zeros(a.shape[1])
         c[:n_weights] = 1.0  # the sum of the weights (other columns unconstrained)
         return constrained_lstsq(a, y, c, 1.0)
+
+
+@functools.lru_cache(maxsize=256)
+def _play_grids(tops: tuple[float, ...], n: int) -> tuple[FloatArray, ...]:
+    """Evenly spaced thresholds from 0 to each top, checked: a discrepancy search fits
+    thousands of times on the same few records, so the same spans recur."""
+    return tuple(_check_thresholds(np.linspace(0.0, top, n)) for top in tops)
 
 
 def _check_thresholds(p: FloatArray) -> FloatArray:

@@ -698,9 +698,16 @@ def _fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: E
     screen: BaseFactory | None = getattr(base_factory, "screen", None)
     search = screen or base_factory
 
+    built: dict[Any, ComposedModel] = {}
+
     def build(theta: Any, factory: BaseFactory = search) -> ComposedModel:
-        m = ComposedModel(factory, [*fixed, Term(effect, theta, ctx)], iterations=iterations)
-        return m.fit(ident)
+        # the refinement's best point was fitted inside its search: kept, not fitted again
+        key = (theta, factory is search)
+        hit = built.get(key)
+        if hit is None:
+            m = ComposedModel(factory, [*fixed, Term(effect, theta, ctx)], iterations=iterations)
+            hit = built[key] = m.fit(ident)
+        return hit
 
     grid = effect.grid(ident)
     if effect.operator and is_gamma(search()):

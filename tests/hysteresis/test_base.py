@@ -146,3 +146,18 @@ def test_as_1d_gives_the_kernels_one_array_type() -> None:
     assert not frozen.flags.writeable  # the caller's array is left as it was
     plain = np.linspace(0.0, 1.0, 8)
     assert as_1d(plain, "u") is plain  # no copy when none is needed
+
+
+def test_as_1d_finds_every_non_finite_value_and_only_those() -> None:
+    from hysteresis.base import as_1d
+
+    for bad, at in (([1.0, np.nan, 2.0], 1), ([np.inf, -np.inf], 0), ([0.0, 0.0, -np.inf], 2)):
+        with pytest.raises(HysteresisError, match=f"non-finite value at index {at}"):
+            as_1d(np.array(bad), "u")
+    # finite values whose sum overflows are still finite
+    big = np.array([1e308, 1e308, -1e308])
+    assert as_1d(big, "u") is big
+    # a big-endian float64 is converted, not passed through as it is
+    swapped = np.arange(4.0).astype(">f8")
+    a = as_1d(swapped, "u")
+    assert a.dtype == np.dtype("=f8") and np.array_equal(a, swapped)

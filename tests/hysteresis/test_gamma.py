@@ -318,3 +318,14 @@ def test_real_catheter_identify_on_one_excitation_validate_on_the_other(
     # the compensator reaches any angle the model can produce from the same start
     target = gamma.predict(ut)
     np.testing.assert_allclose(gamma.predict(gamma.invert(target)), target, atol=1e-8)
+
+
+def test_fits_on_the_same_record_do_not_share_their_thresholds() -> None:
+    u = sine_decay(periods_per_amplitude=1)
+    y = GammaModel.from_params([0.0, 0.5, 1.0], [0.5, 0.3, 0.2]).predict(u)
+    first, second = GammaModel(n_operators=5).fit(u, y), GammaModel(n_operators=5).fit(u, y)
+    assert first.thresholds_ is not second.thresholds_
+    grid = first.thresholds_.copy()
+    first.thresholds_ *= 2.0  # a caller's edit of one model's thresholds stays in that model
+    assert np.array_equal(second.thresholds_, grid)
+    assert np.array_equal(GammaModel(n_operators=5).fit(u, y).thresholds_, grid)
