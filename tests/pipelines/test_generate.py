@@ -109,9 +109,18 @@ def test_bad_options_are_clear_errors(tmp_path: Path) -> None:
 
 def test_cli(tmp_path: Path) -> None:
     env = dict(os.environ, NUMBA_CACHE_DIR=str(REPO / ".venv" / "numba-cache"))
+    # the five excitation kinds, each a couple of seconds long: the command line is tested
+    # here, the runs' content by the tests above
+    short = ("[{kind:sine_decay,amplitudes_mm:[3.0],periods_per_amplitude:1,frequency_hz:0.5},"
+             "{kind:triangle_decay,amplitudes_mm:[3.0],periods_per_amplitude:1,slope_mm_s:6.0},"
+             "{kind:trapezoid_decay,amplitudes_mm:[3.0],periods_per_amplitude:1,slope_mm_s:6.0,"
+             "dwell_s:0.5},{kind:mixed_sine,terms:[{amplitude:3.0,frequency_hz:0.5,"
+             "phase_rad:0.0}],duration_s:2.0},{kind:band_random,amplitude_mm:3.0,"
+             "band_hz:[0.1,0.5],duration_s:2.0,seed:11}]")
     cmd = [sys.executable, "-m", "pipelines.generate", "campaign=quick",
-           "campaign.curve_angles_deg=[45]", "n_jobs=1", "progress=false", "compress=true",
-           f"out={tmp_path / 'raw'}", f"hydra.run.dir={tmp_path / 'hydra'}"]
+           "campaign.curve_angles_deg=[45]", f"campaign.excitations={short}", "n_jobs=1",
+           "progress=false", "compress=true", f"out={tmp_path / 'raw'}",
+           f"hydra.run.dir={tmp_path / 'hydra'}"]
     proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "5 runs written" in proc.stdout
