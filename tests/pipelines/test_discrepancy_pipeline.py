@@ -103,7 +103,8 @@ def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: P
     out = tmp_path / "catheter.json"
     # Gamma with free weights and an offset: the catheter maps mm of tendon to degrees.
     rep = run(cfg(catheter_dir, out, importer=mapping, base_family="gamma",
-                  base_params={"constraint": "free", "fit_offset": True}, ukf_evidence=True))
+                  base_params={"constraint": "free", "fit_offset": True}, ukf_evidence=True,
+                  plots=False))  # the stage's plots: the test above
     assert rep["summary"]["identification_runs"][0].count("data_1_") == 5
     assert len(rep["summary"]["heldout_runs"]) == 5
     assert all("data_2_" in r for r in rep["summary"]["heldout_runs"])
