@@ -29,6 +29,8 @@ Inverses: ``"feedforward"`` is eq. 4 (``u_c = (y_d - beta h)/alpha`` with h driv
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -51,13 +53,26 @@ from hysteresis._numerics import decimation_index
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
-    HysteresisModel,
+    StatefulModel,
     as_1d,
     check_pair,
     register_family,
 )
 
-__all__ = ["PAPER_PENALTY", "BoucWenModel", "bw_simulate", "canonical_params", "paper_mse"]
+__all__ = ["PAPER_PENALTY", "BoucWenModel", "BoucWenState", "bw_simulate", "canonical_params",
+           "paper_mse"]
+
+
+@dataclass(frozen=True)
+class BoucWenState:
+    """Memory of the Bouc-Wen model: the last input ``u`` and the hysteretic state ``h``
+    (eq. 3). Frozen: a step returns a new state and never changes the one it was given."""
+
+    u: float
+    h: float
+
+    def copy(self) -> BoucWenState:
+        return self
 
 
 def _normaliser(x: FloatArray, name: str) -> tuple[float, float]:
@@ -75,7 +90,7 @@ _RAW_METHODS = ("bfgs", "nelder-mead", "powell", "cg", "tnc", "cobyla", "slsqp",
 
 
 @register_family("bouc_wen")
-class BoucWenModel(HysteresisModel):
+class BoucWenModel(StatefulModel):
     """Bouc-Wen model of seed 002 (eq. 2-4) behind the common estimator face.
 
     Hyper-parameters:
@@ -224,28 +239,36 @@ class BoucWenModel(HysteresisModel):
                 float(self.alpha_), float(self.beta_), float(self.offset_))
 
     # -- state and step-wise API ----------------------------------------------------------
-    def initial_state(self, u0: float = 0.0) -> dict[str, float]:
-        """Rest state (h = 0) at input u0. States are ``{"u": last input, "h": eq. 3 state}``."""
-        return {"u": float(u0), "h": 0.0}
+    def initial_state(self, u0: float = 0.0) -> BoucWenState:
+        """Rest state (h = 0) at input u0."""
+        return BoucWenState(float(u0), 0.0)
 
     def _state(self, state: Any, u0: float) -> tuple[float, float]:
+        """(h, u) of ``state``: a :class:`BoucWenState`, or a mapping with keys ``u`` and
+        ``h`` (a state written by hand); None is the rest state at ``u0``."""
         if state is None:
             return 0.0, u0
+        if isinstance(state, BoucWenState):
+            return state.h, state.u
         try:
-            return float(state["h"]), float(state["u"])
-        except (KeyError, TypeError) as exc:
+            if isinstance(state, Mapping):
+                return float(state["h"]), float(state["u"])
+        except (KeyError, TypeError, ValueError) as exc:
             raise HysteresisError(
-                f"Bouc-Wen state must be a mapping with keys 'u' and 'h', got {state!r}"
-            ) from exc
+                f"Bouc-Wen state must be a BoucWenState or a mapping with keys 'u' and 'h', "
+                f"got {state!r}") from exc
+        raise HysteresisError(
+            f"Bouc-Wen state must be a BoucWenState or a mapping with keys 'u' and 'h', "
+            f"got {state!r}")
 
-    def simulate(self, u: Any, *, state: Any = None) -> tuple[FloatArray, dict[str, float]]:
+    def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, BoucWenState]:
         """``predict`` that also returns the final state (to continue a simulation)."""
         uu = as_1d(u, "u")
         a_, b_, c_, n, alpha, beta, off = self._p()
         h0, u0 = self._state(state, float(uu[0]))
         out = np.empty_like(uu)
         h = _simulate(uu, a_, b_, c_, n, alpha, beta, off, h0, u0, int(self.max_substeps), out)
-        return out, {"u": float(uu[-1]), "h": float(h)}
+        return out, BoucWenState(float(uu[-1]), float(h))
 
     def predict(self, u: Any, *, state: Any = None, return_state: bool = False) -> Any:
         """Output of eq. 2 along u, from rest (h = 0 at u[0]) or from ``state``; with
@@ -253,13 +276,14 @@ class BoucWenModel(HysteresisModel):
         y, end = self.simulate(u, state=state)
         return (y, end) if return_state else y
 
-    def step(self, u: float, state: Any = None) -> tuple[float, dict[str, float]]:
+    def step(self, u_k: float, state: Any = None) -> tuple[float, BoucWenState]:
         """One sample: returns (y, new state). ``state=None`` starts at rest at this input."""
         a_, b_, c_, n, alpha, beta, off = self._p()
-        h0, u0 = self._state(state, float(u))
-        h = float(_advance(h0, float(u) - u0, a_, b_, c_, n, int(self.max_substeps),
+        u = float(u_k)
+        h0, u0 = self._state(state, u)
+        h = float(_advance(h0, u - u0, a_, b_, c_, n, int(self.max_substeps),
                            _lip_ultimate(a_, b_, c_, n)))
-        return alpha * float(u) + beta * h + off, {"u": float(u), "h": h}
+        return alpha * u + beta * h + off, BoucWenState(u, h)
 
     def invert(
         self, y_desired: Any, *, state: Any = None, method: str | None = None
@@ -274,7 +298,7 @@ class BoucWenModel(HysteresisModel):
 
     def simulate_inverse(
         self, y_desired: Any, *, state: Any = None, method: str | None = None
-    ) -> tuple[FloatArray, dict[str, float]]:
+    ) -> tuple[FloatArray, BoucWenState]:
         """``invert`` that also returns the final state."""
         yd = as_1d(y_desired, "y_desired")
         a_, b_, c_, n, alpha, beta, off = self._p()
@@ -293,11 +317,11 @@ class BoucWenModel(HysteresisModel):
                                         int(self.max_substeps), out)
         else:
             raise HysteresisError(f"unknown inverse {how!r}; use 'exact' or 'feedforward'")
-        return out, {"u": float(up), "h": float(h)}
+        return out, BoucWenState(float(up), float(h))
 
     def invert_step(
         self, y_desired: float, state: Any = None, *, method: str | None = None
-    ) -> tuple[float, dict[str, float]]:
+    ) -> tuple[float, BoucWenState]:
         """One sample of the inverse: returns (u, new state) with the state of the *model*."""
         u, st = self.simulate_inverse(np.array([float(y_desired)]), state=state, method=method)
         return float(u[0]), st

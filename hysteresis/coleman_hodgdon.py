@@ -28,6 +28,8 @@ reversal of a true backlash (slope 2B - C at a reversal), so ``b_sign="free"`` l
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numba
@@ -39,13 +41,13 @@ from hysteresis._numerics import decimation_index
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
-    HysteresisModel,
+    StatefulModel,
     as_1d,
     check_pair,
     register_family,
 )
 
-__all__ = ["ColemanHodgdonModel", "ch_simulate", "PAPER_PARAMS"]
+__all__ = ["ColemanHodgdonModel", "ColemanHodgdonState", "ch_simulate", "PAPER_PARAMS"]
 
 PAPER_PARAMS = (0.95, -0.92, 18.53)  # seed 000, section V-B: [A_Ref, B_Ref, C_Ref]
 
@@ -204,8 +206,20 @@ def _normaliser(x: FloatArray, name: str) -> tuple[float, float]:
     return 0.5 * (hi + lo), half
 
 
+@dataclass(frozen=True)
+class ColemanHodgdonState:
+    """Memory of the Coleman-Hodgdon model: the last input ``u`` and output ``y`` (eq. 10's
+    state). Frozen: a step returns a new state and never changes the one it was given."""
+
+    u: float
+    y: float
+
+    def copy(self) -> ColemanHodgdonState:
+        return self
+
+
 @register_family("coleman_hodgdon")
-class ColemanHodgdonModel(HysteresisModel):
+class ColemanHodgdonModel(StatefulModel):
     """Coleman-Hodgdon model of seed 000 (eq. 10-11) behind the common estimator face.
 
     Hyper-parameters:
@@ -363,31 +377,39 @@ class ColemanHodgdonModel(HysteresisModel):
         a_, b_, c_, k = self._p()
         return a_ * abs(v) * (c_ * u + k - y) + b_ * v
 
-    def initial_state(self, u0: float = 0.0) -> dict[str, float]:
-        """Rest state on the loop's centre line at input u0: ``{"u": u0, "y": output}``."""
+    def initial_state(self, u0: float = 0.0) -> ColemanHodgdonState:
+        """Rest state on the loop's centre line at input u0."""
         a_, b_, c_, k = self._p()
-        return {"u": float(u0), "y": c_ * float(u0) + k}
+        return ColemanHodgdonState(float(u0), c_ * float(u0) + k)
 
     def _state(self, state: Any, u0: float) -> tuple[float, float]:
+        """(y, u) of ``state``: a :class:`ColemanHodgdonState`, or a mapping with keys ``u``
+        and ``y`` (a state written by hand); None is the rest state at ``u0``."""
         if state is None:
             st = self.initial_state(u0)
-            return st["y"], st["u"]
+            return st.y, st.u
+        if isinstance(state, ColemanHodgdonState):
+            return state.y, state.u
         try:
-            return float(state["y"]), float(state["u"])
-        except (KeyError, TypeError) as exc:
+            if isinstance(state, Mapping):
+                return float(state["y"]), float(state["u"])
+        except (KeyError, TypeError, ValueError) as exc:
             raise HysteresisError(
-                f"Coleman-Hodgdon state must be a mapping with keys 'u' and 'y', got {state!r}"
-            ) from exc
+                "Coleman-Hodgdon state must be a ColemanHodgdonState or a mapping with keys "
+                f"'u' and 'y', got {state!r}") from exc
+        raise HysteresisError(
+            "Coleman-Hodgdon state must be a ColemanHodgdonState or a mapping with keys "
+            f"'u' and 'y', got {state!r}")
 
     # -- forward and inverse ----------------------------------------------------------------
-    def simulate(self, u: Any, *, state: Any = None) -> tuple[FloatArray, dict[str, float]]:
+    def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, ColemanHodgdonState]:
         """``predict`` that also returns the final state."""
         uu = as_1d(u, "u")
         a_, b_, c_, k = self._p()
         y0, u0 = self._state(state, float(uu[0]))
         out = np.empty_like(uu)
         y = _ch_simulate(uu, a_, b_, c_, k, y0, u0, _is_euler(self.scheme), out)
-        return out, {"u": float(uu[-1]), "y": float(y)}
+        return out, ColemanHodgdonState(float(uu[-1]), float(y))
 
     def predict(self, u: Any, *, state: Any = None, return_state: bool = False) -> Any:
         """Output along u from the centre line at u[0] (or from ``state``); with
@@ -395,16 +417,17 @@ class ColemanHodgdonModel(HysteresisModel):
         y, end = self.simulate(u, state=state)
         return (y, end) if return_state else y
 
-    def step(self, u: float, state: Any = None) -> tuple[float, dict[str, float]]:
+    def step(self, u_k: float, state: Any = None) -> tuple[float, ColemanHodgdonState]:
         """One sample: (y, new state)."""
         a_, b_, c_, k = self._p()
-        y0, u0 = self._state(state, float(u))
-        y = float(_ch_advance(y0, u0, float(u), a_, b_, c_, k, _is_euler(self.scheme)))
-        return y, {"u": float(u), "y": y}
+        u = float(u_k)
+        y0, u0 = self._state(state, u)
+        y = float(_ch_advance(y0, u0, u, a_, b_, c_, k, _is_euler(self.scheme)))
+        return y, ColemanHodgdonState(u, y)
 
     def simulate_inverse(
         self, y_desired: Any, *, state: Any = None
-    ) -> tuple[FloatArray, dict[str, float]]:
+    ) -> tuple[FloatArray, ColemanHodgdonState]:
         """``invert`` that also returns the final state."""
         yd = as_1d(y_desired, "y_desired")
         a_, b_, c_, k = self._p()
@@ -415,14 +438,15 @@ class ColemanHodgdonModel(HysteresisModel):
             y0, u0 = self._state(state, 0.0)
         out = np.empty_like(yd)
         y, up = _ch_invert(yd, a_, b_, c_, k, y0, u0, out)
-        return out, {"u": float(up), "y": float(y)}
+        return out, ColemanHodgdonState(float(up), float(y))
 
     def invert(self, y_desired: Any, *, state: Any = None) -> FloatArray:
         """Exact per-step inverse (of the exact scheme): the input sequence whose model output
         is ``y_desired``; every target is reachable since C > 0."""
         return self.simulate_inverse(y_desired, state=state)[0]
 
-    def invert_step(self, y_desired: float, state: Any = None) -> tuple[float, dict[str, float]]:
+    def invert_step(self, y_desired: float, state: Any = None
+                    ) -> tuple[float, ColemanHodgdonState]:
         """One sample of the inverse: (u, new state)."""
         u, st = self.simulate_inverse(np.array([float(y_desired)]), state=state)
         return float(u[0]), st

@@ -24,7 +24,7 @@ import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from hysteresis.base import FloatArray, HysteresisError, as_1d
-from hysteresis.coleman_hodgdon import ColemanHodgdonModel
+from hysteresis.coleman_hodgdon import ColemanHodgdonModel, ColemanHodgdonState
 
 __all__ = [
     "PAPER_P0", "PAPER_Q0", "PAPER_R0", "ActiveModelUKF", "UKFResult", "simulate_with_model_error",
@@ -87,7 +87,7 @@ class ActiveModelUKF:
             dim_x=2, dim_z=1, dt=self.dt, fx=self._fx, hx=self._hx, points=points
         )
         self._u_prev = 0.0
-        self._model_state: dict[str, float] | None = None
+        self._model_state: ColemanHodgdonState | None = None
         self.reset(0.0)
 
     # eq. 18, third line: the sigma points through the discrete model (v and u are fx_args)
@@ -104,9 +104,9 @@ class ActiveModelUKF:
         """Start at input u0 with output y0 (default: the reference model's rest output)."""
         st = self.model.initial_state(float(u0))
         if y0 is not None:
-            st = {"u": float(u0), "y": float(y0)}
+            st = ColemanHodgdonState(float(u0), float(y0))
         self._model_state = st
-        self._ukf.x = np.array([st["y"], float(f_h0)])
+        self._ukf.x = np.array([st.y, float(f_h0)])
         self._ukf.P = self.P0.copy()
         self._ukf.Q = self.Q.copy()
         self._ukf.R = np.array([[self.R]])
@@ -145,8 +145,8 @@ class ActiveModelUKF:
         for i in range(n):
             est[i], fh[i] = self.step(float(uu[i]), float(yy[i]))
             fstd[i] = self.f_h_std
-        model_out = self.model.predict(uu, state={"u": float(uu[0]), "y": float(
-            y0 if y0 is not None else self.model.initial_state(float(uu[0]))["y"])})
+        model_out = self.model.predict(uu, state=ColemanHodgdonState(float(uu[0]), float(
+            y0 if y0 is not None else self.model.initial_state(float(uu[0])).y)))
         return UKFResult(estimate=est, f_h=fh, model=model_out, f_h_std=fstd)
 
 
@@ -160,7 +160,7 @@ def simulate_with_model_error(
     fh = np.broadcast_to(np.asarray(f_h, dtype=np.float64), uu.shape)
     a_, b_, c_ = (float(v) for v in model.params_)
     k = model.k_
-    y = model.initial_state(float(uu[0]))["y"] if y0 is None else float(y0)
+    y = model.initial_state(float(uu[0])).y if y0 is None else float(y0)
     out = np.empty_like(uu)
     up = float(uu[0])
     for i in range(uu.size):

@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 
 from hysteresis.base import HysteresisError, check_inverse_reach, make_family
-from hysteresis.coleman_hodgdon import ColemanHodgdonModel
+from hysteresis.coleman_hodgdon import ColemanHodgdonModel, ColemanHodgdonState
 from hysteresis.compensation import (
     CameraModel,
     LoopResult,
@@ -627,7 +627,7 @@ def run_seed000(cfg: Mapping[str, Any], backend: RigBackend, figs: Figures, *, s
 
         fig, ax = plt.subplots(1, len(segs), figsize=(12, 3.5))
         for a, (name, (pull, alpha)) in zip(np.atleast_1d(ax), segs.items(), strict=True):
-            model = ref.predict(pull, state={"u": float(pull[0]), "y": float(alpha[0])})
+            model = ref.predict(pull, state=ColemanHodgdonState(float(pull[0]), float(alpha[0])))
             a.plot(pull, alpha, lw=0.8, label="measured")
             a.plot(pull, model, lw=0.8, label="CH reference")
             a.set(title=f"pull {name} mm", xlabel="pull [mm]", ylabel="tip angle [deg]")

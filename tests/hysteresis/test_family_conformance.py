@@ -34,6 +34,18 @@ def test_a_prediction_continues_exactly_from_its_returned_state(fitted: Any) -> 
     np.testing.assert_allclose(np.concatenate([head, tail]), whole, rtol=0, atol=1e-12)
 
 
+def test_every_family_is_a_stateful_model_with_a_typed_state(fitted: Any) -> None:
+    from dataclasses import is_dataclass
+
+    from hysteresis.base import StatefulModel
+
+    assert isinstance(fitted, StatefulModel)
+    _, end = fitted.predict(U[:50], return_state=True)
+    for state in (fitted.initial_state(float(U[0])), end, fitted.step(float(U[0]))[1],
+                  fitted.simulate(U[:50])[1]):
+        assert is_dataclass(state) and type(state) is type(end), type(state)
+
+
 def test_one_training_error_attribute_means_the_same_in_every_family(fitted: Any) -> None:
     # sse_: squared errors of the fitted model's own prediction summed over the whole
     # identification record (a decimated fit is still scored on every sample)
@@ -78,3 +90,16 @@ def test_a_preisach_fit_that_fails_midway_leaves_no_plane() -> None:
     with pytest.raises(HysteresisError, match="no positive density"):
         model.fit(U, -Y)  # an output that falls as the input rises: no positive density
     assert not model.is_fitted
+
+
+@pytest.mark.parametrize("name", ["bouc_wen", "coleman_hodgdon"])
+def test_a_state_written_by_hand_is_read_and_a_wrong_one_refused(name: str) -> None:
+    model = make_family(name).fit(U, Y)
+    _, end = model.predict(U[:200], return_state=True)
+    key = "h" if name == "bouc_wen" else "y"
+    as_mapping = {"u": end.u, key: getattr(end, key)}
+    np.testing.assert_array_equal(model.predict(U[200:], state=as_mapping),
+                                  model.predict(U[200:], state=end))
+    for bad in (42, {"u": 0.0}, {"u": 0.0, "h": "x", "y": "x"}):
+        with pytest.raises(HysteresisError, match="state must be"):
+            model.predict(U[:5], state=bad)
