@@ -14,18 +14,23 @@ Families register themselves by name with :func:`register_family` so that
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import inspect
 import json
 import math
-from collections.abc import Sequence
-from typing import Any, ClassVar, TypeVar
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
 FloatArray = npt.NDArray[np.float64]
 M = TypeVar("M", bound="HysteresisModel")
+S = TypeVar("S", bound="DataclassInstance")
 
 _REGISTRY: dict[str, type[HysteresisModel]] = {}
 
@@ -104,6 +109,21 @@ def as_1d(x: Any, name: str) -> FloatArray:
         bad = int(np.flatnonzero(~np.isfinite(arr))[0])
         raise HysteresisError(f"{name} has a non-finite value at index {bad}")
     return arr
+
+
+def state_from(state: Any, state_type: type[S], family: str) -> S:
+    """``state`` as a ``state_type`` (a dataclass of floats): itself, or built from a mapping
+    with the same field names (a state written by hand); anything else is refused."""
+    if isinstance(state, state_type):
+        return state
+    names = [f.name for f in dataclasses.fields(state_type)]
+    if isinstance(state, Mapping):
+        try:
+            return state_type(**{k: float(state[k]) for k in names})
+        except (KeyError, TypeError, ValueError):
+            pass
+    raise HysteresisError(f"{family} state must be a {state_type.__name__} or a mapping with "
+                          f"keys {names}, got {state!r}")
 
 
 def check_pair(u: Any, y: Any) -> tuple[FloatArray, FloatArray]:

@@ -29,7 +29,6 @@ Inverses: ``"feedforward"`` is eq. 4 (``u_c = (y_d - beta h)/alpha`` with h driv
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -57,6 +56,7 @@ from hysteresis.base import (
     as_1d,
     check_pair,
     register_family,
+    state_from,
 )
 
 __all__ = ["PAPER_PENALTY", "BoucWenModel", "BoucWenState", "bw_simulate", "canonical_params",
@@ -70,9 +70,6 @@ class BoucWenState:
 
     u: float
     h: float
-
-    def copy(self) -> BoucWenState:
-        return self
 
 
 def _normaliser(x: FloatArray, name: str) -> tuple[float, float]:
@@ -248,18 +245,8 @@ class BoucWenModel(StatefulModel):
         ``h`` (a state written by hand); None is the rest state at ``u0``."""
         if state is None:
             return 0.0, u0
-        if isinstance(state, BoucWenState):
-            return state.h, state.u
-        try:
-            if isinstance(state, Mapping):
-                return float(state["h"]), float(state["u"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise HysteresisError(
-                f"Bouc-Wen state must be a BoucWenState or a mapping with keys 'u' and 'h', "
-                f"got {state!r}") from exc
-        raise HysteresisError(
-            f"Bouc-Wen state must be a BoucWenState or a mapping with keys 'u' and 'h', "
-            f"got {state!r}")
+        state = state_from(state, BoucWenState, "Bouc-Wen")
+        return state.h, state.u
 
     def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, BoucWenState]:
         """``predict`` that also returns the final state (to continue a simulation)."""

@@ -28,7 +28,6 @@ reversal of a true backlash (slope 2B - C at a reversal), so ``b_sign="free"`` l
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,6 +44,7 @@ from hysteresis.base import (
     as_1d,
     check_pair,
     register_family,
+    state_from,
 )
 
 __all__ = ["ColemanHodgdonModel", "ColemanHodgdonState", "ch_simulate", "PAPER_PARAMS"]
@@ -213,9 +213,6 @@ class ColemanHodgdonState:
 
     u: float
     y: float
-
-    def copy(self) -> ColemanHodgdonState:
-        return self
 
 
 @register_family("coleman_hodgdon")
@@ -388,18 +385,8 @@ class ColemanHodgdonModel(StatefulModel):
         if state is None:
             st = self.initial_state(u0)
             return st.y, st.u
-        if isinstance(state, ColemanHodgdonState):
-            return state.y, state.u
-        try:
-            if isinstance(state, Mapping):
-                return float(state["y"]), float(state["u"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise HysteresisError(
-                "Coleman-Hodgdon state must be a ColemanHodgdonState or a mapping with keys "
-                f"'u' and 'y', got {state!r}") from exc
-        raise HysteresisError(
-            "Coleman-Hodgdon state must be a ColemanHodgdonState or a mapping with keys "
-            f"'u' and 'y', got {state!r}")
+        state = state_from(state, ColemanHodgdonState, "Coleman-Hodgdon")
+        return state.y, state.u
 
     # -- forward and inverse ----------------------------------------------------------------
     def simulate(self, u: Any, state: Any = None) -> tuple[FloatArray, ColemanHodgdonState]:

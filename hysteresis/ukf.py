@@ -100,11 +100,15 @@ class ActiveModelUKF:
     def _hx(x: FloatArray) -> FloatArray:
         return np.array([x[0]])
 
+    def _start(self, u0: float, y0: float | None) -> ColemanHodgdonState:
+        """The reference model's state at input u0: its rest output, or ``y0`` when given."""
+        if y0 is None:
+            return self.model.initial_state(float(u0))
+        return ColemanHodgdonState(float(u0), float(y0))
+
     def reset(self, u0: float, y0: float | None = None, f_h0: float = 0.0) -> None:
         """Start at input u0 with output y0 (default: the reference model's rest output)."""
-        st = self.model.initial_state(float(u0))
-        if y0 is not None:
-            st = ColemanHodgdonState(float(u0), float(y0))
+        st = self._start(u0, y0)
         self._model_state = st
         self._ukf.x = np.array([st.y, float(f_h0)])
         self._ukf.P = self.P0.copy()
@@ -145,8 +149,7 @@ class ActiveModelUKF:
         for i in range(n):
             est[i], fh[i] = self.step(float(uu[i]), float(yy[i]))
             fstd[i] = self.f_h_std
-        model_out = self.model.predict(uu, state=ColemanHodgdonState(float(uu[0]), float(
-            y0 if y0 is not None else self.model.initial_state(float(uu[0])).y)))
+        model_out = self.model.predict(uu, state=self._start(float(uu[0]), y0))
         return UKFResult(estimate=est, f_h=fh, model=model_out, f_h_std=fstd)
 
 
