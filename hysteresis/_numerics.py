@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -28,3 +29,11 @@ def decimation_index(u: FloatArray, max_samples: int) -> npt.NDArray[np.intp]:
         if turns.size <= max_samples // 2:
             idx = np.union1d(idx, np.concatenate([turns, np.array([n - 1])]))
     return idx
+
+
+def decimation_indices(records: Any, max_samples: int) -> list[npt.NDArray[np.intp]]:
+    """:func:`decimation_index` of each record of ``records`` (a :class:`hysteresis.base.
+    Records`), the budget ``max_samples`` shared in proportion to the records' lengths."""
+    total = max(1, int(records.u.size))
+    return [decimation_index(uu, max(10, int(round(max_samples * uu.size / total))))
+            for uu, _ in records.pairs()]

@@ -1,7 +1,9 @@
 """The one estimator face every hysteresis model family wears (scikit-learn style).
 
 * ``__init__`` only stores hyper-parameters (keyword arguments, same names as attributes);
-* ``fit(u, y)`` identifies the model and sets trailing-underscore attributes;
+* ``fit(u, y)`` identifies the model and sets trailing-underscore attributes; ``u`` and ``y``
+  may also be lists of records (several runs), each simulated from its own start
+  (:func:`check_records`), never joined into one record with seams;
 * ``predict(u, *, state=None)`` simulates from the rest state (or a given state);
 * ``invert(y_desired, *, state=None)`` returns an input that makes the model produce ``y``;
 * ``score(u, y)`` is the coefficient of determination R^2 (higher is better, as in sklearn);
@@ -131,6 +133,79 @@ def check_pair(u: Any, y: Any) -> tuple[FloatArray, FloatArray]:
     if uu.shape != yy.shape:
         raise HysteresisError(f"u and y differ in length: {uu.size} vs {yy.size}")
     return uu, yy
+
+
+@dataclasses.dataclass(frozen=True)
+class Records:
+    """One or several identification records, each to be simulated from its own start.
+
+    ``u``/``y`` are the records joined end to end (what a design matrix is built over);
+    ``bounds[i]:bounds[i + 1]`` is record ``i``. A family that fits on ``Records`` restarts
+    its state at every boundary, so no seam of a joined record is ever read as a jump.
+    """
+
+    u: FloatArray
+    y: FloatArray
+    bounds: tuple[int, ...]
+
+    @property
+    def n_records(self) -> int:
+        return len(self.bounds) - 1
+
+    def slices(self) -> list[slice]:
+        return [slice(a, b) for a, b in zip(self.bounds[:-1], self.bounds[1:], strict=True)]
+
+    def pairs(self) -> list[tuple[FloatArray, FloatArray]]:
+        return [(self.u[s], self.y[s]) for s in self.slices()]
+
+    def thin(self, keep: Sequence[npt.NDArray[np.intp]]) -> Records:
+        """The records with only the samples ``keep[i]`` (indices into record ``i``)."""
+        parts = [(uu[k], yy[k]) for (uu, yy), k in zip(self.pairs(), keep, strict=True)]
+        return _join(parts)
+
+
+def is_record_list(x: Any) -> bool:
+    """True when ``x`` is a list/tuple of signals (several records), not one signal."""
+    return (isinstance(x, (list, tuple)) and len(x) > 0
+            and all(isinstance(v, (np.ndarray, list, tuple)) for v in x))
+
+
+def check_records(u: Any, y: Any, *, min_samples: int = 1) -> Records:
+    """One record (two 1-D signals) or several (two equally long lists of 1-D signals) as
+    :class:`Records`; every record must have ``min_samples`` samples or more."""
+    if is_record_list(u) or is_record_list(y):
+        if not (is_record_list(u) and is_record_list(y)) or len(u) != len(y):
+            raise HysteresisError(
+                "several records need a list of inputs and a list of outputs of the same "
+                f"length, got {type(u).__name__} and {type(y).__name__}")
+        parts = [check_pair(uu, yy) for uu, yy in zip(u, y, strict=True)]
+    else:
+        parts = [check_pair(u, y)]
+    for i, (uu, _) in enumerate(parts):
+        if uu.size < min_samples:
+            which = f"record {i}" if len(parts) > 1 else "the record"
+            raise HysteresisError(f"need at least {min_samples} samples to fit, {which} "
+                                  f"has {uu.size}")
+    return _join(parts)
+
+
+def _join(parts: Sequence[tuple[FloatArray, FloatArray]]) -> Records:
+    bounds = np.cumsum([0, *(p[0].size for p in parts)]).tolist()
+    if len(parts) == 1:
+        return Records(parts[0][0], parts[0][1], tuple(bounds))
+    return Records(np.concatenate([p[0] for p in parts]),
+                   np.concatenate([p[1] for p in parts]), tuple(bounds))
+
+
+def records_sse(model: Any, records: Records) -> float:
+    """Squared error summed over the records, each predicted from rest (its own start)."""
+    total = 0.0
+    for uu, yy in records.pairs():
+        pred = np.asarray(model.predict(uu), dtype=np.float64)
+        if not np.all(np.isfinite(pred)):
+            return math.inf
+        total += float(np.sum((yy - pred) ** 2))
+    return total
 
 
 def check_inverse_reach(model: Any, *, identified_range: tuple[float, float] | None = None,

@@ -48,13 +48,14 @@ from hysteresis._bw_kernels import (
     canonical_params,
     paper_mse,
 )
-from hysteresis._numerics import decimation_index
+from hysteresis._numerics import decimation_indices
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
     StatefulModel,
     as_1d,
-    check_pair,
+    check_records,
+    records_sse,
     register_family,
     state_from,
 )
@@ -134,21 +135,22 @@ class BoucWenModel(StatefulModel):
         unknown = sorted(set(fit_params) - {"x0"})
         if unknown:
             raise HysteresisError(f"BoucWenModel.fit takes only x0, got {unknown}")
-        uu, yy = check_pair(u, y)
-        if uu.size < 10:
-            raise HysteresisError(f"need at least 10 samples to fit Bouc-Wen, got {uu.size}")
+        recs = check_records(u, y, min_samples=10)
         if self.method not in ("varpro", *_RAW_METHODS):
             raise HysteresisError(
                 f"unknown Bouc-Wen method {self.method!r}; use 'varpro' or one of {_RAW_METHODS}"
             )
-        keep = decimation_index(uu, int(self.fit_max_samples))
-        ud, yd = uu[keep], yy[keep]
+        thin = recs.thin(decimation_indices(recs, int(self.fit_max_samples)))
+        ud, yd = thin.u, thin.y
         if self.method == "varpro":
             with single_thread_blas():
-                params, offset = self._fit_varpro(ud, yd)
+                params, offset = self._fit_varpro(ud, yd, thin.slices())
         else:
             from hysteresis._bw_raw import fit_raw
 
+            if thin.n_records > 1:
+                raise HysteresisError(f"method {self.method!r} fits one record; use 'varpro' "
+                                      f"for {thin.n_records} records")
             if self.fit_offset:
                 raise HysteresisError(
                     f"method {self.method!r} fits the paper's exact form; set fit_offset=False"
@@ -159,14 +161,15 @@ class BoucWenModel(StatefulModel):
         a_, b_, c_, n, alpha, beta = (float(v) for v in params)
         self.A_, self.B_, self.C_, self.n_ = a_, b_, c_, n
         self.alpha_, self.beta_, self.offset_ = alpha, beta, float(offset)
-        pred = self.predict(uu)
-        finite = bool(np.all(np.isfinite(pred)))
-        # the one training error of every family: squared errors summed over the record
-        self.sse_ = float(np.sum((yy - pred) ** 2)) if finite else math.inf
-        self.n_samples_ = int(uu.size)
+        # the one training error of every family: squared errors summed over the records
+        self.sse_ = records_sse(self, recs)
+        self.n_samples_ = int(recs.u.size)
         return self
 
-    def _fit_varpro(self, u: FloatArray, y: FloatArray) -> tuple[FloatArray, float]:
+    def _fit_varpro(self, u: FloatArray, y: FloatArray,
+                    pieces: list[slice]) -> tuple[FloatArray, float]:
+        """Canonical shape search with the linear stage projected out; ``pieces`` are the
+        records (each simulated from h = 0 at its own first input)."""
         uc, us = _normaliser(u, "u")
         yc, ys = _normaliser(y, "y")
         if not self.fit_offset:
@@ -185,7 +188,8 @@ class BoucWenModel(StatefulModel):
             phi[:, 2] = 1.0
 
         def objective(z: FloatArray) -> tuple[float, FloatArray]:
-            ok = _canon_sens(un, float(z[0]), float(z[1]), float(z[2]), max_sub, h, s)
+            ok = all(_canon_sens(un[sl], float(z[0]), float(z[1]), float(z[2]), max_sub,
+                                 h[sl], s[sl]) for sl in pieces)
             if not ok:
                 return 1e3, np.zeros(3)
             phi[:, 1] = h

@@ -36,13 +36,14 @@ import numpy as np
 from scipy.optimize import differential_evolution, lsq_linear, minimize, minimize_scalar
 
 from hysteresis._blas import single_thread_blas
-from hysteresis._numerics import decimation_index
+from hysteresis._numerics import decimation_indices
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
     StatefulModel,
     as_1d,
-    check_pair,
+    check_records,
+    records_sse,
     register_family,
     state_from,
 )
@@ -255,14 +256,13 @@ class ColemanHodgdonModel(StatefulModel):
         if fit_params:
             raise HysteresisError(
                 f"ColemanHodgdonModel.fit takes no extra arguments: {sorted(fit_params)}")
-        uu, yy = check_pair(u, y)
-        if uu.size < 10:
-            raise HysteresisError(f"need at least 10 samples to fit Coleman-Hodgdon, got {uu.size}")
+        recs = check_records(u, y, min_samples=10)
         if self.b_sign not in ("negative", "free"):
             raise HysteresisError(f"b_sign must be 'negative' or 'free', got {self.b_sign!r}")
         euler = _is_euler(self.scheme)
-        keep = decimation_index(uu, int(self.fit_max_samples))
-        ud, yd = uu[keep], yy[keep]
+        thin = recs.thin(decimation_indices(recs, int(self.fit_max_samples)))
+        ud, yd = thin.u, thin.y
+        pieces = thin.slices()
         uc, us = _normaliser(ud, "u")
         yc, ys = _normaliser(yd, "y")
         un = (ud - uc) / us
@@ -270,10 +270,10 @@ class ColemanHodgdonModel(StatefulModel):
         b_hi = -1e-9 if self.b_sign == "negative" else 20.0
         if self.method == "ga":
             with single_thread_blas():
-                z = self._fit_ga(un, yn, euler, b_hi)
+                z = self._fit_ga(un, yn, euler, b_hi, pieces)
         elif self.method == "varpro":
             with single_thread_blas():
-                z = self._fit_varpro(un, yn, euler, b_hi)
+                z = self._fit_varpro(un, yn, euler, b_hi, pieces)
         else:
             raise HysteresisError(
                 f"unknown Coleman-Hodgdon method {self.method!r}; use 'ga' or 'varpro'"
@@ -286,16 +286,19 @@ class ColemanHodgdonModel(StatefulModel):
         k = float(ys * k_n + yc - self.C_ * uc)
         self.origin_u_ = float(uc)
         self.origin_y_ = float(k + self.C_ * uc)
-        pred = self.predict(uu)
-        self.sse_ = float(np.sum((yy - pred) ** 2))
-        self.n_samples_ = int(uu.size)
+        self.sse_ = records_sse(self, recs)
+        self.n_samples_ = int(recs.u.size)
         return self
 
-    def _fit_ga(self, un: FloatArray, yn: FloatArray, euler: bool, b_hi: float) -> FloatArray:
+    def _fit_ga(self, un: FloatArray, yn: FloatArray, euler: bool, b_hi: float,
+                pieces: list[slice]) -> FloatArray:
         def batch(pop: FloatArray) -> FloatArray:
             pop2 = np.ascontiguousarray(pop.reshape(4, -1), dtype=np.float64)
-            out = np.empty(pop2.shape[1])
-            _ch_mse_batch(un, yn, pop2, euler, out)
+            out = np.zeros(pop2.shape[1])
+            part = np.empty(pop2.shape[1])
+            for sl in pieces:  # each record from its own start; MSE over all samples
+                _ch_mse_batch(un[sl], yn[sl], pop2, euler, part)
+                out += part * ((sl.stop - sl.start) / un.size)
             return out
 
         # Normalised units: slopes are O(1); log10 A in [-1.5, 2.5] spans loops that close
@@ -317,13 +320,15 @@ class ColemanHodgdonModel(StatefulModel):
                 x = np.asarray(pol.x, dtype=np.float64)
         return x
 
-    def _fit_varpro(self, un: FloatArray, yn: FloatArray, euler: bool, b_hi: float) -> FloatArray:
+    def _fit_varpro(self, un: FloatArray, yn: FloatArray, euler: bool, b_hi: float,
+                    pieces: list[slice]) -> FloatArray:
         basis = np.empty((un.size, 3))
         lb = np.array([-20.0, 1e-6, -np.inf])
         ub = np.array([b_hi, np.inf, np.inf])
 
         def solve(la: float) -> tuple[float, FloatArray]:
-            _ch_basis(un, 10.0**la, euler, basis)
+            for sl in pieces:
+                _ch_basis(un[sl], 10.0**la, euler, basis[sl])
             if not np.all(np.isfinite(basis)):
                 return math.inf, np.zeros(3)
             res = lsq_linear(basis, yn, bounds=(lb, ub), method="bvls")

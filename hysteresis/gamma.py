@@ -48,10 +48,11 @@ from hysteresis.base import (
     FloatArray,
     HysteresisError,
     HysteresisModel,
+    Records,
     StatefulModel,
     as_1d,
     check_inverse_reach,
-    check_pair,
+    check_records,
     register_family,
 )
 from hysteresis.play import (
@@ -220,7 +221,7 @@ class GammaModel(StatefulModel):
             cands = self._threshold_candidates(as_1d(u, "u"))
             p = cands[THRESHOLD_FRACTIONS.index(1.0 / 6.0)] if len(cands) > 1 else cands[0]
             return p, self._positions()[0]
-        return self._choose_setup(*check_pair(u, y))
+        return self._choose_setup(check_records(u, y))
 
     def start_outputs(self, u0: float, p: Any, position: float | None = None) -> FloatArray:
         """Every play's output before the first sample ``u0`` (see ``start_state``)."""
@@ -262,8 +263,8 @@ class GammaModel(StatefulModel):
             raise HysteresisError(
                 f"constraint must be one of {CONSTRAINTS}, got {self.constraint!r}"
             )
-        uu, yy = check_pair(u, y)
-        sse, p, x, lam, pos = self._best_fit(uu, yy)
+        recs = check_records(u, y)
+        sse, p, x, lam, pos = self._best_fit(recs)
         n = p.size
         self.start_position_ = pos
         self.thresholds_ = p
@@ -271,11 +272,11 @@ class GammaModel(StatefulModel):
         self.offset_ = float(x[n]) if self.fit_offset else 0.0
         self.lagrange_multiplier_ = lam
         self.sse_ = sse
-        self.n_samples_ = int(uu.size)
-        self.input_span_ = float(np.ptp(uu))
+        self.n_samples_ = int(recs.u.size)
+        self.input_span_ = float(np.ptp(recs.u))
         return self
 
-    def _best_fit(self, uu: FloatArray, yy: FloatArray
+    def _best_fit(self, recs: Records
                   ) -> tuple[float, FloatArray, FloatArray, float, float]:
         """(SSE, thresholds, solution, multiplier, start position) of the best candidate.
 
@@ -288,22 +289,29 @@ class GammaModel(StatefulModel):
         own start. Candidates are compared on the QR-reduced problem (a k x k least squares
         with the same minimiser); the chosen one is solved on the full record.
         """
-        p, pos = self._choose_setup(uu, yy)
-        plays = play_matrix(uu, p, self._start(float(uu[0]), p, pos))[0]
-        x, lam = self._solve(plays, yy)
-        resid = self._design(plays) @ x - yy
+        p, pos = self._choose_setup(recs)
+        plays = self._plays(recs, p, pos)
+        x, lam = self._solve(plays, recs.y)
+        resid = self._design(plays) @ x - recs.y
         return float(resid @ resid), p, x, lam, pos
 
-    def _choose_setup(self, uu: FloatArray, yy: FloatArray) -> tuple[FloatArray, float]:
+    def _plays(self, recs: Records, p: FloatArray, pos: float) -> FloatArray:
+        """Play outputs over every record, each record's plays started at its own first
+        input (stacked: one least squares over all records, no seam between them)."""
+        mats = [np.asarray(play_matrix(uu, p, self._start(float(uu[0]), p, pos))[0])
+                for uu, _ in recs.pairs()]
+        return mats[0] if len(mats) == 1 else np.vstack(mats)
+
+    def _choose_setup(self, recs: Records) -> tuple[FloatArray, float]:
         """(thresholds, start position) of the best candidate, screened on the QR-reduced
         problem (see :meth:`_best_fit`); no solve on the full record."""
-        spans = self._threshold_candidates(uu)
+        spans = self._threshold_candidates(recs.u)
         positions = self._positions()
         if len(spans) == 1 and len(positions) == 1:
             return spans[0], positions[0]
         screened: list[tuple[float, int, float]] = []
         for i, c in enumerate(spans):
-            scores = [self._screen(uu, yy, c, pos) for pos in positions]
+            scores = [self._screen(recs, c, pos) for pos in positions]
             k = int(np.argmin(scores))
             if scores[k] > (1.0 - START_GAIN) * scores[0]:
                 k = 0
@@ -311,10 +319,11 @@ class GammaModel(StatefulModel):
         _, i, pos = min(screened)
         return spans[i], pos
 
-    def _screen(self, uu: FloatArray, yy: FloatArray, p: FloatArray, pos: float) -> float:
+    def _screen(self, recs: Records, p: FloatArray, pos: float) -> float:
         """Squared error of the candidate (thresholds ``p``, start ``pos``), through the QR
         reduction: ``||A x - y||^2 = ||R x - Q^T y||^2 + ||y||^2 - ||Q^T y||^2``."""
-        a = self._design(play_matrix(uu, p, self._start(float(uu[0]), p, pos))[0])
+        yy = recs.y
+        a = self._design(self._plays(recs, p, pos))
         with single_thread_blas():
             gram, aty = a.T @ a, a.T @ yy
             try:  # R^T R = A^T A: R is Q^T A's triangle (up to signs), for a fraction of a QR

@@ -12,7 +12,8 @@ from hysteresis.base import (
     HysteresisError,
     StatefulModel,
     as_1d,
-    check_pair,
+    check_records,
+    records_sse,
     register_family,
 )
 from hysteresis.lag import delay_search_max
@@ -52,25 +53,28 @@ class LinearModel(StatefulModel):
         """Least-squares gain and offset (and delay, if searched)."""
         if fit_params:
             raise HysteresisError(f"LinearModel.fit takes no extra arguments: {sorted(fit_params)}")
-        uu, yy = check_pair(u, y)
+        recs = check_records(u, y)
         for name in ("delay", "max_delay"):
             value = getattr(self, name)
             if value is not None and int(value) < 0:
                 raise HysteresisError(f"{name} must be >= 0 or None, got {value}")
+        pairs = recs.pairs()
         delays: range | list[int]
         if self.delay is not None:
             delays = [int(self.delay)]
         else:
             top = self.max_delay
             if top is None:
-                top = int(np.floor(delay_search_max(uu, yy, 1.0)))
+                top = min(int(np.floor(delay_search_max(uu, yy, 1.0))) for uu, yy in pairs)
             delays = range(int(top) + 1)
         best: tuple[float, int, float, float] | None = None
         for d in delays:
-            if uu.size - d < 2:
+            # every record delayed on its own: no sample of one explains another's
+            usable = [(uu[: uu.size - d], yy[d:]) for uu, yy in pairs if uu.size - d >= 1]
+            if sum(x.size for x, _ in usable) < 2 or len(usable) < len(pairs):
                 break
-            x = uu[: uu.size - d]
-            t = yy[d:]
+            x = np.concatenate([x for x, _ in usable])
+            t = np.concatenate([t for _, t in usable])
             a = np.column_stack([x, np.ones(x.size)])
             coef, *_ = np.linalg.lstsq(a, t, rcond=None)
             # compare delays on the mean squared error over the samples each one explains
@@ -78,14 +82,13 @@ class LinearModel(StatefulModel):
             if best is None or mse < best[0]:
                 best = (mse, d, float(coef[0]), float(coef[1]))
         if best is None:
-            raise HysteresisError(f"too few samples ({uu.size}) for delay {self.delay}")
+            raise HysteresisError(f"too few samples ({recs.u.size}) for delay {self.delay}")
         _, d, gain, off = best
         self.gain_ = gain
         self.offset_ = off
         self.delay_ = int(d)
-        y_hat = self.predict(uu)
-        self.sse_ = float(np.sum((y_hat - yy) ** 2))
-        self.n_samples_ = int(yy.size)
+        self.sse_ = records_sse(self, recs)
+        self.n_samples_ = int(recs.u.size)
         return self
 
     def initial_state(self, u0: float = 0.0) -> LinearState:

@@ -45,7 +45,8 @@ from hysteresis.base import (
     HysteresisError,
     StatefulModel,
     as_1d,
-    check_pair,
+    check_records,
+    records_sse,
     register_family,
 )
 from hysteresis.play import (
@@ -206,25 +207,31 @@ class PreisachModel(StatefulModel):
 
     # -- identification ---------------------------------------------------------------
     def fit(self, u: Any, y: Any, **fit_params: Any) -> PreisachModel:
-        """Identify the density (and offset) from one record, from the demagnetised state."""
+        """Identify the density (and offset) from one record or several, each from the
+        demagnetised state at its own first input."""
         if fit_params:
             raise HysteresisError(f"PreisachModel.fit takes no extra args: {sorted(fit_params)}")
         self._check_hyper()
-        uu, yy = check_pair(u, y)
-        self._set_plane(uu)
-        r0 = self.initial_state(float(uu[0])).r
+        recs = check_records(u, y)
+        self._set_plane(recs.u)
         every = int(self.fit_every)
-        rows, _ = relay_states(uu, self.alpha_, self.beta_, float(self.ramp_width_), r0, every)
-        target = yy[::every]
+        blocks = []
+        for uu, _ in recs.pairs():
+            r0 = self.initial_state(float(uu[0])).r
+            blocks.append(relay_states(uu, self.alpha_, self.beta_, float(self.ramp_width_),
+                                       r0, every)[0])
+        rows = blocks[0] if len(blocks) == 1 else np.vstack(blocks)
+        target = np.concatenate([yy[::every] for _, yy in recs.pairs()])
+        u_rows = np.concatenate([uu[::every] for uu, _ in recs.pairs()])
         # Small dense algebra: BLAS threads only add contention (the pipeline already fits
         # configurations in parallel), so identification runs single-threaded.
         with single_thread_blas():
             if self.density == "nonparametric":
-                self._fit_nonparametric(rows, target, uu[::every])
+                self._fit_nonparametric(rows, target, u_rows)
             else:
-                self._fit_parametric(rows, target, uu)
-        self.sse_ = float(np.sum((self.predict(uu) - yy) ** 2))
-        self.n_samples_ = int(uu.size)
+                self._fit_parametric(rows, target, recs.u, u_rows)
+        self.sse_ = records_sse(self, recs)
+        self.n_samples_ = int(recs.u.size)
         return self
 
     def _fit_nonparametric(self, rows: FloatArray, target: FloatArray, u_rows: FloatArray) -> None:
@@ -240,12 +247,12 @@ class PreisachModel(StatefulModel):
         self.reversible_gain_ = float(x[k + 2]) if self.reversible else 0.0
         self.density_params_ = np.zeros(0)
 
-    def _fit_parametric(self, rows: FloatArray, target: FloatArray, u: FloatArray) -> None:
+    def _fit_parametric(self, rows: FloatArray, target: FloatArray, u: FloatArray,
+                        u_rows: FloatArray) -> None:
         # x = (N, H0, sigma, centre, kappa, offset, gain); N, offset, gain enter linearly.
         half = 0.5 * float(u.max() - u.min())
         centre0 = 0.5 * float(u.max() + u.min())
         k = rows.shape[1]
-        u_rows = u[:: int(self.fit_every)]
         # The residual is linear in (cell weights, offset, gain): one QR of [rows, 1, u] turns
         # the n_rows-long least squares into an equivalent (K + 2)-long one (same minimiser).
         # QR of the augmented matrix [rows, 1, u, target] (R only, no Q formed): its last column
