@@ -26,10 +26,16 @@ def max_amplitude(x: FloatArray) -> float:
     return float(np.nanmax(np.abs(x))) if np.isfinite(x).any() else float("nan")
 
 
-def normalise(input_: FloatArray, output: FloatArray) -> dict[str, FloatArray | float]:
-    """Offsets removed; ``input_norm``/``output_norm`` = value / max input amplitude."""
+def normalise(input_: FloatArray, output: FloatArray, *,
+              rezero_output: bool = True) -> dict[str, FloatArray | float]:
+    """Offsets removed; ``input_norm``/``output_norm`` = value / max input amplitude.
+
+    ``rezero_output=False`` keeps an absolute output (a tracker's or a camera's angle) as
+    measured: a run that starts loaded then keeps its level, where re-zeroing at its first
+    sample would shift it against every other run of the same plant by its start state."""
     u, u0 = remove_offset(input_)
-    y, y0 = remove_offset(output)
+    y, y0 = remove_offset(output) if rezero_output else (np.array(output, dtype=np.float64),
+                                                         0.0)
     amp = max_amplitude(u)
     if not amp > 0:  # a still input: callers reject the run; avoid 0/0 warnings here
         amp = float("nan")

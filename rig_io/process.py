@@ -52,7 +52,9 @@ def process_run(run: PhysicalRun, *, sync: SyncOptions | None = None
                          file=run.file(source if source != "encoder" else "encoder"),
                          t_ns=int(synced.info["t0_ns"] + round(synced.t_s[i] * 1e9)))
     t_s = synced.t_s[keep] - synced.t_s[lo]
-    norm = normalise(ch["input"][keep], output[keep])
+    # encoders count relative to their first sample (the format says so); a tracker or a
+    # camera measures an absolute quantity, whose level at the start is part of the state
+    norm = normalise(ch["input"][keep], output[keep], rezero_output=source == "encoder")
     amp = float(norm["input_amplitude"])
     if not np.isfinite(amp) or amp <= 0:
         raise RigIOError("the input never moves (maximum input amplitude is 0)",

@@ -52,14 +52,15 @@ def test_all_ten_catheter_runs_ingest(tmp_path: Path, catheter_dir: Path) -> Non
     first = df[df.run_id == "catheter_data_1_1"]
     assert len(first) == 34061  # every logged sample, on the log's own time base
     assert first["t_s"].iloc[-1] == pytest.approx(70.0, abs=0.5)
-    # Output: Angle x from the tracker, about 30 -> 93 deg, start offset removed.
+    # Output: Angle x from the tracker, about 30 -> 93 deg, kept as measured (an absolute
+    # angle: a run that starts bent must not be shifted against the others).
     assert runs["catheter_data_1_1"]["output_source"] == "tracker"
-    assert runs["catheter_data_1_1"]["output_offset"] == pytest.approx(30.0)
+    assert runs["catheter_data_1_1"]["output_offset"] == 0.0
     assert runs["catheter_data_1_1"]["units"] == {"input": "mm", "output": "deg",
                                                   "camera": None, "tracker": "deg",
                                                   "tension": "N"}
-    assert 55 < first["output"].max() < 70
-    np.testing.assert_allclose(first["tracker"] - 30.0, first["output"])
+    assert 85 < first["output"].max() < 100 and first["output"].iloc[0] == pytest.approx(30.0)
+    np.testing.assert_allclose(first["tracker"], first["output"])
     assert first["input"].max() == pytest.approx(5.766304)
     assert first["input_norm"].max() == pytest.approx(1.0)
     assert first["tension_proxy"].notna().all() and first["tension_in_n"].isna().all()
