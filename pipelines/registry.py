@@ -173,8 +173,10 @@ def choose_champions(fits: pd.DataFrame, metrics: pd.DataFrame, *, metric: str =
                      fit_excitation: str | None = None) -> pd.DataFrame:
     """The fit row with the lowest mean held-out ``metric`` per configuration.
 
-    Configurations without held-out rows fall back to the fit split. Failed fits never win.
-    Adds ``heldout.<m>`` columns (the mean over held-out excitations) and ``score``.
+    Configurations without held-out rows fall back to the fit split, and their columns say
+    so: ``insample.<m>``, never ``heldout.<m>``. Failed fits never win. Adds the
+    ``heldout.<m>`` (or ``insample.<m>``) columns (the mean over the evaluation excitations),
+    ``score`` and ``score_split``.
     """
     from pipelines.stages import _num
 
@@ -192,7 +194,8 @@ def choose_champions(fits: pd.DataFrame, metrics: pd.DataFrame, *, metric: str =
         use = held if not held.empty else sel[sel["split"] == "fit"]
         if use.empty:
             continue
-        means = {f"heldout.{m}": float(use[m].astype(float).mean())
+        prefix = "heldout" if not held.empty else "insample"
+        means = {f"{prefix}.{m}": float(use[m].astype(float).mean())
                  for m in TAG_METRICS if m in use.columns}
         score = float(use[metric].astype(float).mean())
         if score != score:
@@ -204,8 +207,13 @@ def choose_champions(fits: pd.DataFrame, metrics: pd.DataFrame, *, metric: str =
     frame = pd.DataFrame(rows)
     frame["_cfg"] = frame.apply(lambda r: registered_name(
         str(r["rig"]), _num(r["curve_angle_deg"]), _num(r["radius_mm"]), prefix=""), axis=1)
-    best = frame.sort_values(["_cfg", "score", "family"]).groupby("_cfg", sort=True).head(1)
-    return best.drop(columns="_cfg").sort_values(keys[1:4]).reset_index(drop=True)
+    # a held-out score always outranks an in-sample one (a model never judged on unseen data
+    # cannot beat one that was)
+    frame["_insample"] = frame["score_split"] != "heldout"
+    best = (frame.sort_values(["_cfg", "_insample", "score", "family"])
+            .groupby("_cfg", sort=True).head(1))
+    return (best.drop(columns=["_cfg", "_insample"]).sort_values(keys[1:4])
+            .reset_index(drop=True))
 
 
 def _same(column: pd.Series, value: float | None) -> pd.Series:
@@ -275,7 +283,7 @@ def register_champions(tracker: Any, fits: pd.DataFrame, metrics: pd.DataFrame, 
                 "fit_run_ids": str(champ["fit_run_ids"]),
                 "score_split": str(champ["score_split"]),
                 **{k: repr(float(v)) for k, v in champ.items()
-                   if k.startswith("heldout.") and v == v}}
+                   if k.startswith(("heldout.", "insample.")) and v == v}}
         artifact_uri = str(retry(client.get_run, run_id).info.artifact_uri)
         version = retry(client.create_model_version, name,
                         f"{artifact_uri.rstrip('/')}/{ARTIFACT_PATH}", run_id=run_id, tags=tags)

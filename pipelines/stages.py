@@ -68,8 +68,15 @@ class Configuration:
 
     @property
     def label(self) -> str:
-        """File- and MLflow-safe name, e.g. ``tsm-bench_phi090_r030``."""
+        """File- and MLflow-safe name, e.g. ``tsm-bench_phi090_r030``; a rig that records no
+        sheath shape (a catheter, a joint) is named by its rig alone."""
+        if self.curve_angle_deg is None and self.radius_mm is None:
+            return self.rig
         return f"{self.rig}_phi{_fmt(self.curve_angle_deg)}_r{_fmt(self.radius_mm)}"
+
+    @property
+    def has_shape(self) -> bool:
+        return self.curve_angle_deg is not None and self.radius_mm is not None
 
     def as_dict(self) -> dict[str, Any]:
         return {"rig": self.rig, "curve_angle_deg": self.curve_angle_deg,
@@ -278,8 +285,10 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
     3. else, for a configuration recorded in one run only, the run's head identifies and its
        last ``single_run_heldout_fraction`` (excitation ``<kind>.tail``) is held out.
 
-    Runs marked held-out by their manifest never identify. A configuration the rule cannot
-    decide is left to :func:`identification_run`, whose error names the option to set.
+    Runs marked held-out by their manifest never identify, and every one of them is scored as
+    held out, whatever its excitation is called: its kind joins ``heldout`` (renamed
+    ``<kind>.heldout`` where the same kind also identifies). A configuration the rule cannot
+    decide is left to :func:`identification_runs`, whose error names the option to set.
     """
     roles = {str(k): str(v).lower() for k, v in (roles or {}).items() if v}
     if not 0.05 <= single_run_heldout_fraction <= 0.5:
@@ -335,8 +344,40 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
     for col in ("run_id", "excitation"):
         if isinstance(dataset[col].dtype, pd.CategoricalDtype):
             out[col] = out[col].astype(str)
+    out = _held_out_by_role(out, roles, fit_kinds, held_kinds)
     return IdentificationPlan(out, tuple(fit_kinds), tuple(held_kinds), frozenset(chosen),
                               notes, frozenset(all_marked))
+
+
+#: Suffix of a held-out run's excitation when runs of the same kind also identify.
+HELDOUT_SUFFIX = ".heldout"
+
+
+def _held_out_by_role(dataset: pd.DataFrame, roles: Mapping[str, str],
+                      fit_kinds: list[str], held_kinds: list[str]) -> pd.DataFrame:
+    """Every run whose role is held-out is scored as held out (its kind joins
+    ``held_kinds``, in place); where its kind also identifies, it is renamed
+    ``<kind>.heldout`` so that it is never scored in the fit split."""
+    held_runs = sorted(r for r, role in roles.items() if role in HELDOUT_ROLES)
+    if not held_runs:
+        return dataset
+    mask = dataset["run_id"].astype(str).isin(held_runs)
+    if not mask.any():
+        return dataset
+    kinds = dataset.loc[mask, "excitation"].astype(str)
+    # a kind clashes only where runs that are not held out identify with it
+    others = set(dataset.loc[~mask, "excitation"].astype(str))
+    clash = kinds.isin([k for k in fit_kinds if k in others])
+    if clash.any():
+        dataset = dataset.copy()
+        if isinstance(dataset["excitation"].dtype, pd.CategoricalDtype):
+            dataset["excitation"] = dataset["excitation"].astype(str)
+        dataset.loc[kinds.index[clash], "excitation"] = kinds[clash] + HELDOUT_SUFFIX
+        kinds = dataset.loc[mask, "excitation"].astype(str)
+    for kind in sorted(set(kinds)):
+        if kind not in held_kinds:
+            held_kinds.append(kind)
+    return dataset
 
 
 def manifest_roles(runs_meta: Mapping[str, Mapping[str, Any]]) -> dict[str, str]:
@@ -350,26 +391,26 @@ def manifest_roles(runs_meta: Mapping[str, Mapping[str, Any]]) -> dict[str, str]
     return out
 
 
-def identification_run(runs: Sequence[RunSignal], chosen: set[str], *,
-                       label: str) -> RunSignal:
-    """The run a configuration identifies on: the only candidate, or the one in ``chosen``.
+def identification_runs(runs: Sequence[RunSignal], chosen: set[str], *,
+                        label: str) -> tuple[RunSignal, ...]:
+    """The runs a configuration identifies on: the only candidate, or every one in
+    ``chosen`` (``fit_runs`` or a manifest role), fitted jointly.
 
-    Hysteresis models carry a state, so they identify on one record, never a concatenation of
-    records that each start from rest; with several candidates and none named, nothing decides
-    which, and the error says how to decide.
+    A joint fit simulates each run from its own start (never a concatenation of records that
+    each start from rest, whose seams would read as jumps); with several candidates and none
+    named, nothing decides which, and the error says how to decide.
     """
-    named = [r for r in runs if r.run_id in chosen]
-    if len(named) == 1:
-        return named[0]
-    ids = ", ".join(r.run_id for r in (named or runs))
-    if len(named) > 1:
-        raise PipelineError(f"{label}: fit_runs names {len(named)} runs ({ids}); name one")
+    named = tuple(r for r in runs if r.run_id in chosen)
+    if named:
+        return named
     if len(runs) == 1:
-        return runs[0]
+        return (runs[0],)
+    ids = ", ".join(r.run_id for r in runs)
     raise PipelineError(
-        f"{label}: {len(runs)} runs could identify ({ids}); choose one with "
-        f"fit_runs=[<run id>, ...] (one per configuration and excitation), or fit on another "
-        f"excitation with fit_excitations=[...]")
+        f"{label}: {len(runs)} runs could identify ({ids}); choose with "
+        f"fit_runs=[<run id>, ...] (several named runs are fitted jointly), mark them "
+        f"`role: identification` in the manifest or mapping, or fit on another excitation "
+        f"with fit_excitations=[...]")
 
 
 def plan_fits(
@@ -385,8 +426,9 @@ def plan_fits(
 ) -> list[FitTask]:
     """One task per family x configuration x identification excitation present in the data.
 
-    Which run identifies (see :func:`identification_run`): the one run of the excitation in
-    the configuration, or the one named in ``fit_runs``; never a silent pick among several.
+    Which runs identify (see :func:`identification_runs`): the one run of the excitation in
+    the configuration, or every run named in ``fit_runs`` or marked by its manifest (fitted
+    jointly); never a silent pick among several.
     """
     check_dataset(dataset, signals=(input_col, output_col))
     if not families:
@@ -407,17 +449,23 @@ def plan_fits(
                 warnings.warn(f"{config.label}: no {kind!r} run to identify on, skipped",
                               stacklevel=2)
                 continue
-            run = identification_run(runs, chosen, label=f"{config.label} {kind!r}")
-            why = ("its manifest role is identify" if run.run_id in own else
-                   "named in fit_runs" if run.run_id in chosen else f"its only {kind} run")
-            log.info("fit: %s identifies on %s (%s)", config.label, run.run_id, why)
+            chosen_runs = identification_runs(runs, chosen, label=f"{config.label} {kind!r}")
+            first = chosen_runs[0].run_id
+            why = ("manifest role identify" if first in own else
+                   "named in fit_runs" if first in chosen else f"its only {kind} run")
+            log.info("fit: %s identifies on %s (%s%s)", config.label,
+                     ", ".join(r.run_id for r in chosen_runs), why,
+                     f"; {len(chosen_runs)} runs fitted jointly, each from its own start"
+                     if len(chosen_runs) > 1 else "")
+            data = (chosen_runs[0].data_hash if len(chosen_runs) == 1
+                    else [r.data_hash for r in chosen_runs])
             for fam in families:
                 key = cache.combine({
                     "stage": "fit", "family": fam.name, "config": dict(fam.config),
-                    "code": fam.code_hash, "data": run.data_hash,
+                    "code": fam.code_hash, "data": data,
                     "signals": [input_col, output_col],
                 })
-                tasks.append(FitTask(fam, config, kind, (run,), key))
+                tasks.append(FitTask(fam, config, kind, chosen_runs, key))
     if not tasks:
         raise PipelineError(
             f"nothing to fit: no run of excitation(s) {list(fit_excitations)} in the "
@@ -428,12 +476,12 @@ def plan_fits(
 
 def fit_task(task: FitTask) -> dict[str, Any]:
     """Identify one model; a failure is recorded in the row (``error``), never raised."""
-    run = task.runs[0]
     row: dict[str, Any] = {
         "family": task.family.name, **task.config.as_dict(),
         "fit_excitation": task.fit_excitation,
         "fit_run_ids": ",".join(r.run_id for r in task.runs),
-        "n_samples": int(run.u.size), "key": task.key, "model_json": None,
+        "n_samples": int(sum(r.u.size for r in task.runs)), "key": task.key,
+        "model_json": None,
         "params_json": json.dumps(dict(task.family.config), sort_keys=True, default=str),
         "fit_seconds": float("nan"), "error": None, "cached": False,
     }
@@ -442,7 +490,10 @@ def fit_task(task: FitTask) -> dict[str, Any]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             model = task.family.build(task.family.config)
-            model.fit(run.u, run.y)
+            if len(task.runs) == 1:
+                model.fit(task.runs[0].u, task.runs[0].y)
+            else:  # one parameter set, every run simulated from its own start
+                model.fit([r.u for r in task.runs], [r.y for r in task.runs])
         row["model_json"] = model.to_json(indent=None)
     except Exception as exc:  # noqa: BLE001 - one bad fit must not stop the other 119
         row["error"] = f"{type(exc).__name__}: {exc}"
@@ -590,6 +641,48 @@ def evaluate_configuration(
     return metrics, preds, errors
 
 
+#: Columns of the per-run metrics table (``metrics_by_run``): one row per model and run.
+RUN_METRICS_COLUMNS: tuple[str, ...] = (
+    "family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation", "eval_excitation",
+    "split", "run_id", *METRIC_NAMES, "max_abs_error",
+)
+
+
+def run_metrics(preds: pd.DataFrame, metrics: pd.DataFrame,
+                config: Configuration) -> pd.DataFrame:
+    """Error statistics of every run on its own (the pooled ``metrics`` pool the runs of one
+    evaluation excitation): what a per-file comparison, as in a paper's table, needs."""
+    if preds.empty or metrics.empty:
+        return run_metrics_frame([])
+    split_of = {(str(r.family), str(r.fit_excitation), str(r.eval_excitation)): str(r.split)
+                for r in metrics.itertuples(index=False)}
+    rows = []
+    keys = ["family", "fit_excitation", "eval_excitation", "run_id"]
+    for key, g in preds.groupby(keys, sort=True, observed=True):
+        fam, fit_kind, kind, run_id = (str(k) for k in key)
+        split = split_of.get((fam, fit_kind, kind))
+        if split is None:
+            continue
+        y = g["output"].to_numpy(dtype=np.float64)
+        yhat = g["predicted"].to_numpy(dtype=np.float64)
+        stats = error_statistics(y, yhat)
+        err = np.abs(y - yhat)
+        rows.append({"family": fam, **config.as_dict(), "fit_excitation": fit_kind,
+                     "eval_excitation": kind, "split": split, "run_id": run_id, **stats,
+                     "max_abs_error": float(np.nanmax(err))})
+    return run_metrics_frame(rows)
+
+
+def run_metrics_frame(rows: Iterable[Mapping[str, Any]]) -> pd.DataFrame:
+    frame = pd.DataFrame(list(rows), columns=list(RUN_METRICS_COLUMNS))
+    for col in ("family", "rig", "fit_excitation", "eval_excitation", "split", "run_id"):
+        frame[col] = frame[col].astype("string")
+    frame["n"] = frame["n"].astype("int64")
+    for col in ("curve_angle_deg", "radius_mm", *METRIC_NAMES[1:], "max_abs_error"):
+        frame[col] = pd.to_numeric(frame[col], errors="coerce").astype("float64")
+    return frame
+
+
 def metrics_frame(rows: Iterable[Mapping[str, Any]]) -> pd.DataFrame:
     """Rows -> the metrics table with exactly :data:`METRICS_COLUMNS` and stable dtypes."""
     frame = pd.DataFrame(list(rows), columns=list(METRICS_COLUMNS))
@@ -684,3 +777,29 @@ def family_summary(board: pd.DataFrame, *, metric: str = "rmse") -> pd.DataFrame
         f"median_heldout_{metric}": g[f"heldout_{metric}"].median(),
     }).reset_index()
     return summary.sort_values(["mean_rank", "family"], kind="stable").reset_index(drop=True)
+
+
+def headline(summary: pd.DataFrame, *, metric: str = "rmse", unit: str = "") -> str:
+    """One sentence a reader takes away: who wins how many configurations, its median
+    held-out error, and by how much it beats the no-hysteresis baseline (linear) or else the
+    runner-up. ``summary``: :func:`family_summary`."""
+    if summary.empty:
+        return "No model was scored."
+    col = f"median_heldout_{metric}"
+    split = "held-out"
+    if summary[col].isna().all():
+        col, split = f"median_fit_{metric}", "in-sample (nothing held out was scored)"
+    best = summary.sort_values(["wins", "mean_rank"], ascending=[False, True]).iloc[0]
+    n_cfg = int(summary["configurations"].max())
+    text = (f"{best['family']} wins {int(best['wins'])} of {n_cfg} configuration"
+            f"{'s' if n_cfg != 1 else ''}; median {split} {metric.upper()} "
+            f"{float(best[col]):.3g}{' ' + unit if unit else ''}")
+    others = summary[summary["family"] != best["family"]]
+    ref = others[others["family"] == "linear"]
+    if ref.empty and not others.empty:
+        ref = others.sort_values(col).head(1)
+    if not ref.empty and float(best[col]) > 0:
+        r = ref.iloc[0]
+        text += (f", {float(r[col]) / float(best[col]):.2g}x below {r['family']} "
+                 f"({float(r[col]):.3g}{' ' + unit if unit else ''})")
+    return text + "."

@@ -74,16 +74,20 @@ def validate_configuration(
     cross: bool,
     key: str,
     path: Path,
-) -> tuple[pd.DataFrame, list[str]]:
-    """Evaluate one configuration and write its predictions file (a joblib task)."""
+    config: Configuration,
+) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
+    """Evaluate one configuration and write its predictions file (a joblib task):
+    (pooled metrics, per-run metrics, errors)."""
     metrics, preds, errors = stages.evaluate_configuration(fits, signals, heldout=heldout,
                                                            cross=cross)
+    by_run = stages.run_metrics(preds, metrics, config)
     for col in ("family", "fit_excitation", "eval_excitation", "run_id"):
         if col in preds:
             preds[col] = preds[col].astype("category")
-    record = {"key": key, "metrics": metrics.to_dict("records"), "errors": errors}
+    record = {"key": key, "metrics": metrics.to_dict("records"),
+              "run_metrics": by_run.to_dict("records"), "errors": errors}
     write_predictions(path, preds, record)
-    return metrics, errors
+    return metrics, by_run, errors
 
 
 def select_fits(fits: pd.DataFrame, configs: Sequence[Configuration],
@@ -133,8 +137,9 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
 
     start = time.perf_counter()
     done: list[pd.DataFrame] = []
+    done_runs: list[pd.DataFrame] = []
     errors: list[str] = []
-    todo: list[tuple[pd.DataFrame, dict[str, list[RunSignal]], str, Path]] = []
+    todo: list[tuple[pd.DataFrame, dict[str, list[RunSignal]], str, Path, Configuration]] = []
     by_label = {c.label: c for c in configs}
     for label, group in fits.groupby(
         fits.apply(lambda r: Configuration(str(r["rig"]), stages._num(r["curve_angle_deg"]),
@@ -147,21 +152,27 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
         key = stages.validation_key(group, signals, settings)
         path = prediction_path(paths.predictions, config)
         meta = read_prediction_meta(path) if use_cache and path.exists() else None
-        if meta is not None and meta.get("key") == key:
+        if meta is not None and meta.get("key") == key and "run_metrics" in meta:
             done.append(stages.metrics_frame(meta["metrics"]))
+            done_runs.append(stages.run_metrics_frame(meta["run_metrics"]))
             errors.extend(meta.get("errors", []))
         else:
-            todo.append((group, signals, key, path))
+            todo.append((group, signals, key, path, config))
     n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg["n_jobs"])
     results = _run_tasks(todo, heldout=heldout, cross=cross, n_jobs=n_jobs,
                          progress=bool(cfg["progress"]))
-    for metrics, errs in results:
+    for metrics, by_run, errs in results:
         done.append(metrics)
+        done_runs.append(by_run)
         errors.extend(errs)
     metrics = stages.sort_metrics(pd.concat(done, ignore_index=True)) if done else \
         stages.metrics_frame([])
     metrics = stages.metrics_frame(metrics.to_dict("records"))
     write_metrics(metrics, paths)
+    runs_table = stages.run_metrics_frame(
+        pd.concat(done_runs, ignore_index=True).to_dict("records") if done_runs else [])
+    write_table(runs_table, paths.reports / "metrics_by_run")
+    _warn_if_nothing_held_out(metrics, heldout)
     write_text_atomic(paths.reports / "validate_errors.json", json.dumps(errors, indent=1))
     log.info("validate: %d configurations (%d recomputed), %d metric rows in %.1f s",
              len(done), len(todo), len(metrics), time.perf_counter() - start)
@@ -170,9 +181,22 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     return metrics, errors
 
 
-def _run_tasks(todo: Sequence[tuple[pd.DataFrame, dict[str, list[RunSignal]], str, Path]], *,
+def _warn_if_nothing_held_out(metrics: pd.DataFrame, heldout: Sequence[str]) -> None:
+    """Every score in-sample is worth a loud line: a champion would be chosen on how well a
+    model fits its own identification data."""
+    if metrics.empty or (metrics["split"] == "heldout").any():
+        return
+    log.warning(
+        "validate: NOTHING HELD OUT WAS SCORED: every metric is in-sample (split 'fit'). "
+        "No run has a held-out excitation kind %s and no run is marked held out; list the "
+        "kinds with heldout=[...] or give runs `role: held_out` in their manifest or mapping",
+        list(heldout))
+
+
+def _run_tasks(todo: Sequence[tuple[pd.DataFrame, dict[str, list[RunSignal]], str, Path,
+                                    Configuration]], *,
                heldout: Sequence[str], cross: bool, n_jobs: int, progress: bool
-               ) -> list[tuple[pd.DataFrame, list[str]]]:
+               ) -> list[tuple[pd.DataFrame, pd.DataFrame, list[str]]]:
     if not todo:
         return []
     if n_jobs == 1 or len(todo) == 1:
@@ -181,13 +205,15 @@ def _run_tasks(todo: Sequence[tuple[pd.DataFrame, dict[str, list[RunSignal]], st
             from tqdm import tqdm
 
             items = tqdm(todo, desc="validate", unit="config")
-        return [validate_configuration(g, s, heldout=heldout, cross=cross, key=k, path=p)
-                for g, s, k, p in items]
+        return [validate_configuration(g, s, heldout=heldout, cross=cross, key=k, path=p,
+                                       config=c)
+                for g, s, k, p, c in items]
     from joblib import Parallel, delayed
 
     gen: Any = Parallel(n_jobs=n_jobs, return_as="generator")(
-        delayed(validate_configuration)(g, s, heldout=heldout, cross=cross, key=k, path=p)
-        for g, s, k, p in todo)
+        delayed(validate_configuration)(g, s, heldout=heldout, cross=cross, key=k, path=p,
+                                        config=c)
+        for g, s, k, p, c in todo)
     if progress:
         from tqdm import tqdm
 
@@ -197,19 +223,25 @@ def _run_tasks(todo: Sequence[tuple[pd.DataFrame, dict[str, list[RunSignal]], st
 
 def write_metrics(metrics: pd.DataFrame, paths: Paths) -> None:
     """``metrics.parquet`` and ``metrics.csv``, atomically, only when the content changed."""
+    write_table(metrics, paths.metrics_parquet.with_suffix(""))
+
+
+def write_table(table: pd.DataFrame, stem: Path) -> None:
+    """``<stem>.parquet`` and ``<stem>.csv``, atomically, only when the content changed."""
     from pipelines import cache
 
-    new_hash = cache.hash_frame(metrics)
-    if paths.metrics_parquet.exists() and paths.metrics_csv.exists():
+    parquet, csv = stem.with_suffix(".parquet"), stem.with_suffix(".csv")
+    new_hash = cache.hash_frame(table)
+    if parquet.exists() and csv.exists():
         try:
-            if cache.hash_frame(pd.read_parquet(paths.metrics_parquet)) == new_hash:
+            if cache.hash_frame(pd.read_parquet(parquet)) == new_hash:
                 return
         except (OSError, pa.ArrowException):
             pass
-    with atomic_path(paths.metrics_parquet) as tmp:
-        metrics.to_parquet(tmp, index=False)
-    with atomic_path(paths.metrics_csv) as tmp:
-        metrics.to_csv(tmp, index=False)
+    with atomic_path(parquet) as tmp:
+        table.to_parquet(tmp, index=False)
+    with atomic_path(csv) as tmp:
+        table.to_csv(tmp, index=False)
 
 
 def main_cfg(cfg: Any) -> pd.DataFrame:

@@ -163,6 +163,16 @@ def test_fit_runs_chooses_the_identification_run_and_the_row_records_it() -> Non
                                                fit_runs=[original]))
     assert list(other["fit_run_ids"]) == [original]
     assert other["model_json"].iloc[0] != fits["model_json"].iloc[0]
-    with pytest.raises(PipelineError, match="fit_runs names 2 runs"):
+    # naming both fits one parameter set on both runs, each from its own start
+    both = stages.fit_models(stages.plan_fits(data, spec, stages.configurations(data),
+                                              fit_excitations=["sine_decay"],
+                                              fit_runs=[repeat, original]))
+    assert sorted(both["fit_run_ids"].iloc[0].split(",")) == sorted([repeat, original])
+    assert int(both["n_samples"].iloc[0]) == int(fits["n_samples"].iloc[0]) + int(
+        other["n_samples"].iloc[0])
+    assert both["model_json"].iloc[0] not in (fits["model_json"].iloc[0],
+                                              other["model_json"].iloc[0])
+    # two candidates and none named: refused, with the ways to decide
+    with pytest.raises(PipelineError, match="fitted jointly"):
         stages.plan_fits(data, spec, stages.configurations(data),
-                         fit_excitations=["sine_decay"], fit_runs=[repeat, original])
+                         fit_excitations=["sine_decay"])
