@@ -122,6 +122,23 @@ def read_processed(path: Path) -> pd.DataFrame:
     return read_dataset(path)
 
 
+def dataset_units(path: Path) -> tuple[str, str]:
+    """(input unit, output unit) of the processed dataset at ``path``, from ingest's run index:
+    the one each signal has in every run, ``"mixed units"`` where runs disagree, ``"?"`` where
+    the index does not say."""
+    from rig_io.dataset import read_runs
+
+    found: list[set[str]] = [set(), set()]
+    for meta in read_runs(path).values():
+        units = meta.get("units") or {}
+        for i, key in enumerate(("input", "output")):
+            if units.get(key):
+                found[i].add(str(units[key]))
+    pair = tuple(next(iter(f)) if len(f) == 1 else ("mixed units" if f else "?")
+                 for f in found)
+    return pair[0], pair[1]
+
+
 def dataset_hash(path: Path) -> str:
     """Content hash of the processed dataset's parquet files (contents, not times).
 

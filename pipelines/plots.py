@@ -49,8 +49,11 @@ def _thin(n: int, max_points: int) -> slice:
 
 
 def configuration_figure(preds: pd.DataFrame, path: Path, *, title: str,
-                         fit_excitation: str, dpi: int = 72, max_points: int = 1500) -> Path:
-    """Time series (left) and loops (right) of the measured output and every family."""
+                         fit_excitation: str, dpi: int = 72, max_points: int = 1500,
+                         units: tuple[str, str] = ("mm", "mm")) -> Path:
+    """Time series (left) and loops (right) of the measured output and every family;
+    ``units``: the input's and the output's unit (axis labels)."""
+    u_unit, y_unit = units
     # Group once (no per-filter string conversion of 100k categorical rows).
     preds = preds[np.asarray(preds["fit_excitation"] == fit_excitation, dtype=bool)]
     groups = {(str(k), str(f), str(r)): g for (k, f, r), g in preds.groupby(
@@ -82,9 +85,9 @@ def configuration_figure(preds: pd.DataFrame, path: Path, *, title: str,
                       color=_color(fam, i))
         split = "identification" if kind == fit_excitation else "held-out"
         ax_t.set_title(f"{kind} ({split})", fontsize=9, loc="left")
-        ax_t.set_ylabel("output [mm]")
-        ax_l.set_xlabel("input [mm]")
-        ax_l.set_ylabel("output [mm]")
+        ax_t.set_ylabel(f"output [{y_unit}]")
+        ax_l.set_xlabel(f"input [{u_unit}]")
+        ax_l.set_ylabel(f"output [{y_unit}]")
         ax_t.grid(alpha=0.3)
         ax_l.grid(alpha=0.3)
     axes[-1][0].set_xlabel("t [s]")
@@ -98,8 +101,10 @@ def configuration_figure(preds: pd.DataFrame, path: Path, *, title: str,
 
 def elementary_figure(t: np.ndarray, u: np.ndarray, y: np.ndarray, operators: np.ndarray,
                       weights: np.ndarray, thresholds: np.ndarray, path: Path, *,
-                      title: str, dpi: int = 72, max_points: int = 3000) -> Path:
+                      title: str, dpi: int = 72, max_points: int = 3000,
+                      units: tuple[str, str] = ("mm", "mm")) -> Path:
     """Weighted elementary operators q_i gamma_i (seed 001 Fig. 4.12) and their sum."""
+    u_unit, y_unit = units
     s = _thin(t.size, max_points)
     weighted = operators * weights[None, :]
     fig, (ax_t, ax_l) = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios":
@@ -113,8 +118,8 @@ def elementary_figure(t: np.ndarray, u: np.ndarray, y: np.ndarray, operators: np
     ax_t.plot(t[s], weighted.sum(axis=1)[s], color="r", lw=1.2, label="sum (Gamma)")
     ax_t.plot(t[s], y[s], color="k", lw=0.8, ls="--", label="measured")
     ax_t.set_xlabel("t [s]")
-    ax_t.set_ylabel("q_i gamma_i [mm]")
-    ax_l.set_xlabel("input [mm]")
+    ax_t.set_ylabel(f"q_i gamma_i [{y_unit}]")
+    ax_l.set_xlabel(f"input [{u_unit}]")
     ax_t.legend(fontsize=6, ncol=2, loc="upper right")
     for ax in (ax_t, ax_l):
         ax.grid(alpha=0.3)

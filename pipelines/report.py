@@ -15,6 +15,7 @@ from __future__ import annotations
 import html
 import json
 import logging
+import re
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -30,6 +31,7 @@ from pipelines import cache, schemas, stages
 from pipelines.common import (
     Paths,
     dataset_hash,
+    dataset_units,
     hydra_output_dir,
     hydra_sweep_dir,
     to_container,
@@ -117,7 +119,7 @@ class Doc:
             if kind == "h":
                 body.append(f"<h{data[0]}>{esc(data[1])}</h{data[0]}>")
             elif kind == "p":
-                body.append(f"<p>{esc(data)}</p>")
+                body.append(f"<p>{_inline_html(esc(data))}</p>")
             elif kind == "table":
                 frame, fmt = data
                 head = "".join(f"<th>{esc(str(c))}</th>" for c in frame.columns)
@@ -138,6 +140,12 @@ class Doc:
                  "img{max-width:100%}figcaption{font-size:12px;color:#555}")
         return (f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}"
                 f"</title><style>{style}</style></head><body>{''.join(body)}</body></html>\n")
+
+
+def _inline_html(text: str) -> str:
+    """The Markdown a paragraph uses (``**bold**``, `` `code` ``) as HTML (text escaped)."""
+    text = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", text)
+    return re.sub(r"`([^`]+)`", r"<code>\1</code>", text)
 
 
 # --------------------------------------------------------------------------------------
@@ -211,7 +219,8 @@ def generalisation_table(metrics: pd.DataFrame, *, fit_excitation: str,
 
 
 def _plot_configuration(pred_path: Path, out: Path, title: str, fit_excitation: str,
-                        dpi: int, max_points: int) -> Path | None:
+                        dpi: int, max_points: int,
+                        units: tuple[str, str] = ("mm", "mm")) -> Path | None:
     from pipelines import plots
 
     if not pred_path.exists():
@@ -220,7 +229,7 @@ def _plot_configuration(pred_path: Path, out: Path, title: str, fit_excitation: 
     if preds.empty:
         return None
     return plots.configuration_figure(preds, out, title=title, fit_excitation=fit_excitation,
-                                      dpi=dpi, max_points=max_points)
+                                      dpi=dpi, max_points=max_points, units=units)
 
 
 def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
@@ -258,8 +267,12 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
                                                           "cache")}
     # The unseen-shape stage's summary, shown when it was written (it runs before the report).
     unseen_csv = reports / "unseen_shape_summary.csv"
+    units = dataset_units(paths.processed)
+    by_run_file = reports / "metrics_by_run.parquet"
+    by_run = pd.read_parquet(by_run_file) if by_run_file.exists() else pd.DataFrame()
     key = cache.combine({
-        "stage": "report", "metrics": cache.hash_frame(metrics),
+        "stage": "report", "metrics": cache.hash_frame(metrics), "units": list(units),
+        "by_run": cache.hash_frame(by_run) if not by_run.empty else "",
         "unseen_shape": cache.hash_files([unseen_csv]) if unseen_csv.exists() else "",
         "models": sorted(fits["key"].astype(str)), "predictions": pred_keys,
         "settings": settings,
@@ -310,16 +323,18 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
         from joblib import Parallel, delayed
 
         made = Parallel(n_jobs=n_jobs)(delayed(_plot_configuration)(
-            p, o, t, fit_exc, dpi, max_points) for _, p, o, t in jobs)
+            p, o, t, fit_exc, dpi, max_points, units) for _, p, o, t in jobs)
     else:
-        made = [_plot_configuration(p, o, t, fit_exc, dpi, max_points) for _, p, o, t in jobs]
+        made = [_plot_configuration(p, o, t, fit_exc, dpi, max_points, units)
+                for _, p, o, t in jobs]
     for (label, *_), path in zip(jobs, made, strict=True):
         if path is not None:
             config_plots.setdefault(label, []).append(path)
             files.append(path)
 
     exemplary = pick_exemplary(configs, cfg["exemplary"])
-    elementary = _elementary_plot(fits, exemplary, paths, fit_exc, plots_dir, dpi, max_points)
+    elementary = _elementary_plot(fits, exemplary, paths, fit_exc, plots_dir, dpi, max_points,
+                                  units)
     if elementary is not None:
         files.append(elementary)
         config_plots.setdefault(exemplary.label, []).append(elementary)
@@ -344,7 +359,7 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
                     summary=summary, general=general, metric=metric, fit_exc=fit_exc,
                     exemplary=exemplary,
                     config_plots=config_plots, shape_figs=shape_figs, elementary=elementary,
-                    paths=paths)
+                    paths=paths, units=units, by_run=by_run)
     formats = list(cfg["formats"])
     if "md" in formats:
         files.append(write_text_atomic(reports / "report.md", doc.markdown()))
@@ -361,7 +376,8 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
 
 
 def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fit_exc: str,
-                     plots_dir: Path, dpi: int, max_points: int) -> Path | None:
+                     plots_dir: Path, dpi: int, max_points: int,
+                     units: tuple[str, str] = ("mm", "mm")) -> Path | None:
     """Seed 001 Fig. 4.12 for the exemplary configuration's Gamma model."""
     from pipelines import plots
     from pipelines.validate import prediction_path
@@ -390,7 +406,7 @@ def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fi
         sub["t_s"].to_numpy(), u, sub["output"].to_numpy(), ops[:, :q.size], q, p,
         contained(plots_dir, f"elementary_{config.label}.png"),
         title=f"Weighted elementary operators q_i gamma_i of Gamma, {config.label} "
-              f"({fit_exc}; seed 001 Fig. 4.12)", dpi=dpi, max_points=max_points)
+              f"({fit_exc}; seed 001 Fig. 4.12)", dpi=dpi, max_points=max_points, units=units)
 
 
 def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: pd.DataFrame,
@@ -398,16 +414,21 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
               fit_exc: str,
               exemplary: Configuration, config_plots: Mapping[str, list[Path]],
               shape_figs: Sequence[tuple[str, Path]], elementary: Path | None,
-              paths: Paths) -> Doc:
+              paths: Paths, units: tuple[str, str] = ("mm", "mm"),
+              by_run: pd.DataFrame | None = None) -> Doc:
     doc = Doc(root)
+    unit = units[1]
     n_cfg = metrics.groupby(["rig", "curve_angle_deg", "radius_mm"], dropna=False).ngroups
     doc.h(1, "TSM hysteresis pipeline report")
+    doc.p(f"**{stages.headline(summary, metric=metric, unit=unit)}**")
     doc.p(f"{metrics['family'].nunique()} families x {n_cfg} configurations; identification "
           f"excitation `{fit_exc}`; {len(metrics)} metric rows "
           f"(`metrics.parquet`, `metrics.csv`). Dataset hash `{dataset_hash(paths.processed)}`."
-          f" Ranking metric: mean held-out {metric}.")
+          f" Ranking metric: mean held-out {metric}. Input in {units[0]}, output in {unit}.")
     doc.h(2, "Families over all configurations")
-    doc.table(summary)
+    doc.table(with_units(summary, unit))
+    if by_run is not None and not by_run.empty:
+        _per_run_section(doc, by_run, metric=metric, unit=unit)
     if not general.empty:
         doc.h(2, f"Held-out / in-sample {metric} per family and excitation")
         doc.p(f"Each model's {metric} on an excitation it was not identified on, divided by its "
@@ -415,7 +436,7 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
               "configurations; `generalisation.csv`). `mixed_sine` (seed 001 eq. 4.11 at "
               "other amplitudes) and `band_random` (non-periodic, drifting amplitude and rate) "
               "are evaluation-only: a ratio near 1 there means the model generalises.")
-        doc.table(general)
+        doc.table(with_units(general, unit))
     unseen_csv = paths.reports / "unseen_shape_summary.csv"
     unseen = pd.read_csv(unseen_csv) if unseen_csv.exists() else pd.DataFrame()
     if not unseen.empty:
@@ -438,10 +459,11 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
                                                      dropna=False)["family"]
                    .agg(lambda s: "/".join(sorted(s))))
         wide["best"] = winners
+        wide.columns = [f"{c} [{unit}]" if c != "best" else c for c in wide.columns]
         doc.table(wide.reset_index())
     doc.h(2, "Table 4.1 equivalent: Gamma weights Q and SSE per configuration")
-    doc.p("Weights identified under sum(Q) = 1 (seed 001 eq. 4.10 as its text means it); SSE "
-          "on the identification record at the rig's sample rate (`gamma_weights.parquet`).")
+    doc.p(f"{_gamma_constraint_text(fits)} SSE on the identification record(s) at the rig's "
+          f"sample rate, in {unit}^2 (`gamma_weights.parquet`).")
     if not gamma.empty:
         doc.table(gamma.drop(columns=["thresholds", "fit_excitation"]))
     if metrics["fit_excitation"].nunique() > 1:
@@ -472,6 +494,59 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
         for e in val_errors:
             doc.p(f"validate: {e}")
     return doc
+
+
+#: Metric columns in the output's unit (the others are counts, ranks or ratios).
+_UNIT_METRICS = ("rmse", "mean_abs_error", "std_error", "error_range", "mean_error",
+                 "max_abs_error")
+
+
+def with_units(frame: pd.DataFrame, unit: str) -> pd.DataFrame:
+    """``frame`` with the unit in the header of every column that carries one."""
+    def name(col: str) -> str:
+        if col.endswith("sse") or col.endswith("_mse") or col == "mse":
+            return f"{col} [{unit}^2]"
+        if any(col == m or col.endswith("_" + m) for m in _UNIT_METRICS):
+            return f"{col} [{unit}]"
+        return col
+
+    return frame.rename(columns={c: name(str(c)) for c in frame.columns})
+
+
+def _per_run_section(doc: Doc, by_run: pd.DataFrame, *, metric: str, unit: str) -> None:
+    """Each held-out run scored on its own (a paper's per-file table), when there are few
+    enough runs to read them one by one."""
+    held = by_run[by_run["split"] == "heldout"]
+    if held.empty or held["run_id"].nunique() > 30:
+        return
+    doc.h(2, f"Held-out runs one by one ({metric.upper()} [{unit}])")
+    doc.p(f"Every held-out run predicted from rest by each family (`metrics_by_run.csv`); the "
+          f"last rows are the mean over the runs and the largest absolute error in {unit}.")
+    wide = held.pivot_table(index="run_id", columns="family", values=metric, aggfunc="mean",
+                            observed=True)
+    worst = held.pivot_table(index="run_id", columns="family", values="max_abs_error",
+                             aggfunc="max", observed=True)
+    wide.loc["mean over runs"] = wide.mean()
+    wide.loc["largest abs error"] = worst.max()
+    doc.table(wide.reset_index())
+
+
+def _gamma_constraint_text(fits: pd.DataFrame) -> str:
+    """What the Gamma weights of this report were constrained to, from the fits' settings."""
+    rows = fits[fits["family"] == "gamma"] if "family" in fits else fits.iloc[0:0]
+    seen = set()
+    for text in rows.get("params_json", pd.Series(dtype=object)).dropna():
+        try:
+            seen.add(str(json.loads(str(text)).get("constraint", "nonneg")))
+        except (json.JSONDecodeError, AttributeError):
+            continue
+    said = {"nonneg": "non-negative (Q >= 0) with a free output offset; sum(Q) is the "
+                      "loop's outer slope (output per input), not 1",
+            "sum_to_one": "under sum(Q) = 1 (seed 001 eq. 4.10 as its text means it)",
+            "free": "by ordinary least squares (any sign)"}
+    if not seen:
+        return "Weights Q of the Gamma operators."
+    return "Weights identified " + "; ".join(said.get(c, c) for c in sorted(seen)) + "."
 
 
 def main_cfg(cfg: Any) -> ReportResult:

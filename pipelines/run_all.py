@@ -104,6 +104,10 @@ def _identified(plan: Any, pipeline: Mapping[str, Any]) -> str:
     """The excitation the models of this pipeline identify on: the first configured one, or,
     when the data has none of those, the first the identification rule added."""
     configured = list(pipeline["fit_excitations"])
+    if plan.marked:  # runs a manifest or mapping marks for identification decide
+        ds = plan.dataset
+        kinds = ds.loc[ds["run_id"].astype(str).isin(plan.marked), "excitation"].astype(str)
+        return str(kinds.value_counts().index[0])
     added = [k for k in plan.fit_excitations if k not in configured]
     present = set(plan.dataset["excitation"].astype(str))
     return str(configured[0] if configured[0] in present or not added else added[0])
@@ -185,6 +189,13 @@ def run_ingest_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
     from rig_io.synchronise import SyncOptions
 
     icfg = compose_stage("ingest", stage_overrides("ingest", pipeline))
+    if own_data(pipeline):
+        if not pipeline.get("source"):
+            raise PipelineError(
+                f"importer {_importer_name(pipeline)!r} is set but no source: name the folder "
+                f"of your logs, e.g. source=../shared/real-data/tendon-catheter")
+        icfg["source"] = str(pipeline["source"])
+        icfg["importer"] = pipeline.get("importer")
     report: dict[str, Any] = run_ingest(
         str(icfg["source"]), str(icfg["out"]), mapping=icfg["importer"],
         sync=SyncOptions(**icfg["sync"]), force=bool(icfg["force"]), prune=bool(icfg["prune"]),
@@ -194,6 +205,17 @@ def run_ingest_stage(pipeline: Mapping[str, Any]) -> dict[str, Any]:
     if not report.get("n_accepted"):
         raise PipelineError(f"ingest accepted no run from {icfg['source']}")
     return report
+
+
+def own_data(cfg: Mapping[str, Any]) -> bool:
+    """True when the pipeline runs on the user's logs (``importer=...`` and/or
+    ``source=...``) instead of the virtual campaign."""
+    return bool(cfg.get("importer") or cfg.get("source"))
+
+
+def _importer_name(cfg: Mapping[str, Any]) -> str:
+    imp = cfg.get("importer")
+    return str(imp.get("name", "?")) if isinstance(imp, Mapping) else "none (tsm-rig-log/1)"
 
 
 def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
@@ -206,6 +228,10 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
     paths.root.mkdir(parents=True, exist_ok=True)
     result = PipelineResult()
     wanted = list(cfg["stages"])
+    if own_data(cfg) and "generate" in wanted:
+        log.info("run_all: your own data (importer %s, source %s): no virtual campaign is "
+                 "generated", _importer_name(cfg), cfg.get("source"))
+        wanted.remove("generate")
     unknown = [s for s in wanted if s not in (*EXTERNAL_STAGES, *OWN_STAGES)]
     if unknown:
         raise PipelineError(f"unknown stage(s) {unknown}; known: "
@@ -250,10 +276,14 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
                                          fits=result.fits)
         result.timings["validate"] = time.perf_counter() - t0
     if "unseen_shape" in wanted:
-        t0 = time.perf_counter()
-        result.unseen_shape = unseen_shape.run(stage_config("unseen_shape", cfg),
-                                               dataset=planned, fits=result.fits)
-        result.timings["unseen_shape"] = time.perf_counter() - t0
+        why = unseen_shape.not_applicable(planned) if planned is not None else None
+        if why is not None:
+            log.warning("unseen_shape: skipped: %s", why)
+        else:
+            t0 = time.perf_counter()
+            result.unseen_shape = unseen_shape.run(stage_config("unseen_shape", cfg),
+                                                   dataset=planned, fits=result.fits)
+            result.timings["unseen_shape"] = time.perf_counter() - t0
     # MLflow's child runs are logged in a background thread while the report draws (its
     # figures render in worker processes); the figures are attached to the runs afterwards.
     tracking_state: TrackState | None = None

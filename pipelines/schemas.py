@@ -724,9 +724,17 @@ class PipelineConfig(ValidateConfig):
     cross to validate, config, signals, n_jobs, cache and the held-out kinds to unseen_shape,
     n_jobs and cache to report, progress to every stage."""
 
-    #: The stages run, in this order (any subset of the default).
+    #: The stages run, in this order (any subset of the default). With your own data
+    #: (``importer`` or ``source`` set) ``generate`` is left out.
     stages: list[str] = field(default_factory=lambda: [
         "generate", "ingest", "fit", "validate", "unseen_shape", "report"])
+    #: Group conf/importer/: your own logs through a mapping (``importer=tendon_catheter``);
+    #: null = the virtual campaign (or tsm-rig-log/1 runs given as ``source``). The data
+    #: folders are then named after it: data/processed/<name>, data/reports/<name>, ...
+    importer: Any = None
+    #: Your own raw runs or logs (a folder), read in place and never written; null = the
+    #: virtual campaign under ``paths.raw``.
+    source: str | None = None
     overrides: StageOverrides = field(default_factory=StageOverrides)
 
 

@@ -189,6 +189,22 @@ def identification_record(by_kind: Mapping[str, Sequence[RunSignal]], run_ids: s
     return found[0].u[:n_samples], found[0].y[:n_samples]
 
 
+#: Fewest configurations with a curve angle and a radius that a leave-one-out study needs.
+MIN_SHAPED_CONFIGURATIONS = 3
+
+
+def not_applicable(dataset: pd.DataFrame) -> str | None:
+    """Why the stage cannot run on ``dataset`` (None when it can): it predicts a sheath shape
+    from the others, so it needs configurations that record a shape."""
+    configs = stages.configurations(dataset)
+    shaped = [c for c in configs if c.has_shape]
+    if len(shaped) >= MIN_SHAPED_CONFIGURATIONS:
+        return None
+    names = ", ".join(c.label for c in configs)
+    return (f"it needs {MIN_SHAPED_CONFIGURATIONS} or more configurations with a curve angle "
+            f"and a radius, the data has {len(shaped)} ({names})")
+
+
 def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
         fits: pd.DataFrame | None = None) -> UnseenShapeResult:
     """Hydra-free core: config in, :class:`UnseenShapeResult` out; writes under reports/."""
