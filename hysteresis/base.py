@@ -197,6 +197,48 @@ def _join(parts: Sequence[tuple[FloatArray, FloatArray]]) -> Records:
                    np.concatenate([p[1] for p in parts]), tuple(bounds))
 
 
+#: Share of every identification record a default's form choice is judged on: its last part,
+#: predicted after the model has been run through the record's head.
+CHOICE_HELDOUT_FRACTION = 0.3
+#: Relative drop in that held-out error an alternative form must bring to replace the
+#: default's physical one (less is noise, and the physical form extrapolates more safely).
+CHOICE_GAIN = 0.1
+
+
+def choose_form(build: Any, forms: Sequence[Any], records: Records) -> tuple[Any, list[float]]:
+    """The form (the first of ``forms`` is the physical default) whose model, fitted on the
+    head of every record, predicts the records' tails best; ``build(form)`` returns an
+    unfitted model. Returns the chosen form and every form's held-out squared error.
+
+    A later form must lower the error by :data:`CHOICE_GAIN` to be chosen; a form whose fit
+    fails scores infinity. Records too short to split are judged in-sample.
+    """
+    heads, tails = [], []
+    for uu, yy in records.pairs():
+        cut = int(round(uu.size * (1.0 - CHOICE_HELDOUT_FRACTION)))
+        if cut < 20 or uu.size - cut < 10:
+            cut = uu.size
+        heads.append((uu[:cut], yy[:cut]))
+        tails.append(cut)
+    scores = []
+    for form in forms:
+        try:
+            model = build(form).fit([h[0] for h in heads], [h[1] for h in heads])
+            err = 0.0
+            for (uu, yy), cut in zip(records.pairs(), tails, strict=True):
+                pred = np.asarray(model.predict(uu), dtype=np.float64)
+                part = slice(cut, None) if cut < uu.size else slice(None)
+                err += float(np.sum((pred[part] - yy[part]) ** 2))
+            scores.append(err if math.isfinite(err) else math.inf)
+        except (HysteresisError, ValueError, FloatingPointError, np.linalg.LinAlgError):
+            scores.append(math.inf)
+    best = 0
+    for i in range(1, len(forms)):
+        if scores[i] < (1.0 - CHOICE_GAIN) * scores[best]:
+            best = i
+    return forms[best], scores
+
+
 def records_sse(model: Any, records: Records) -> float:
     """Squared error summed over the records, each predicted from rest (its own start)."""
     total = 0.0
@@ -212,8 +254,10 @@ def check_inverse_reach(model: Any, *, identified_range: tuple[float, float] | N
                         desired: Any = None) -> None:
     """Refuse, before anything is driven, an inverse that cannot reach what it is asked for.
 
-    Applies to weighted-play models (a Gamma family fit: ``weights_``/``thresholds_``); other
-    models pass. Raises :class:`HysteresisError` naming the identification range when
+    Any other model, given ``identified_range`` and ``desired``, is refused when a slow sweep of
+    that range does not reach the demanded outputs (a saturating or softening loop). For
+    weighted-play models (a Gamma family fit: ``weights_``/``thresholds_``) it raises
+    :class:`HysteresisError` naming the identification range when
 
     * the total weight ``sum(Q)`` is <= 0: the outer slope of ``v -> Gamma(v)`` then points
       the wrong way (or nowhere), so outputs beyond the loop are unreachable and the nearest
@@ -226,6 +270,7 @@ def check_inverse_reach(model: Any, *, identified_range: tuple[float, float] | N
     q = getattr(model, "weights_", None)
     p = getattr(model, "thresholds_", None)
     if q is None or p is None:
+        _check_swept_reach(model, identified_range, desired)
         return
     q = np.asarray(q, dtype=np.float64).ravel()
     p = np.asarray(p, dtype=np.float64).ravel()
@@ -245,17 +290,50 @@ def check_inverse_reach(model: Any, *, identified_range: tuple[float, float] | N
         if yd.size:
             asked = f"; demanded outputs {float(np.min(yd)):.4g}..{float(np.max(yd)):.4g}"
     if not total > 0:
+        chose = (" (constraint='auto' chose free weights for this loop's shape)"
+                 if getattr(model, "constraint", None) == "auto" else "")
         raise HysteresisError(
             f"{name} cannot reach the demanded outputs{where}: its total weight sum(Q) = "
             f"{total:.4g} <= 0, so its output does not rise with the input beyond the loop"
-            f"{asked}; refit with thresholds inside the identification range or "
-            f"constraint='sum_to_one'")
+            f"{chose}{asked}; refit with constraint='nonneg' or 'sum_to_one' for an "
+            f"invertible model, or with thresholds inside the identification range")
     if wide:
         raise HysteresisError(
             f"{name} cannot be trusted to reach the demanded outputs{where}: thresholds up to "
             f"{float(p.max()):.4g} reach the identification range's span {hi - lo:.4g}, so "
             f"the widest plays never reversed inside it and their weights are not identified"
             f"{asked}; refit with max_threshold < {hi - lo:.4g}")
+
+
+def _check_swept_reach(model: Any, identified_range: tuple[float, float] | None,
+                       desired: Any) -> None:
+    """Refuse demanded outputs a model cannot produce inside its identification range: a
+    slow sweep low -> high -> low of that range bounds what it reaches (a saturating or
+    softening loop flattens at its ends, and its inverse would otherwise run off towards
+    inputs it never saw)."""
+    if identified_range is None or desired is None or not hasattr(model, "predict"):
+        return
+    yd = np.asarray(desired, dtype=np.float64)
+    lo, hi = (float(v) for v in identified_range)
+    if not (yd.size and hi > lo):
+        return
+    ramp = np.linspace(lo, hi, 400)
+    try:
+        swept = np.asarray(model.predict(np.concatenate([ramp, ramp[::-1], ramp])),
+                           dtype=np.float64)
+    except HysteresisError:
+        return
+    if not np.all(np.isfinite(swept)):
+        return
+    ylo, yhi = float(swept.min()), float(swept.max())
+    margin = 0.02 * max(yhi - ylo, 1e-300)
+    dlo, dhi = float(yd.min()), float(yd.max())
+    if dlo < ylo - margin or dhi > yhi + margin:
+        raise HysteresisError(
+            f"{type(model).__name__} cannot reach the demanded outputs {dlo:.4g}..{dhi:.4g} "
+            f"inside its identification range (inputs {lo:.4g}..{hi:.4g}): swept over that "
+            f"range it reaches {ylo:.4g}..{yhi:.4g} (its loop flattens at the ends); scale "
+            f"the target into that band or identify on a wider stroke")
 
 
 class HysteresisModel:

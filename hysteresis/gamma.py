@@ -7,16 +7,24 @@ least-squares problem.
 Defaults are derived from the identification record, never from a unit: the thresholds span
 a fraction of the input's peak-to-peak range (the one of :data:`THRESHOLD_FRACTIONS` with the
 least squared error; 1/6 is the thesis' 0..2 mm on its +-6 mm record); the weights are
-non-negative with a free output offset (a sum-to-one constraint only makes sense when input and
-output share a unit and a unit gain; unconstrained weights turn negative and fit a lag or a
-sign flip as a "loop" that no inverse can use); and every play starts at the first input, at
+non-negative, or free where a held-out part of the record says the loop bends the other way
+(``constraint="auto"``), with a free output offset (a sum-to-one constraint only makes sense
+when input and output share a unit and a unit gain; free weights are only kept where they
+predict unseen data better, since they can also fit a lag or a sign flip as a "loop" that no
+inverse can use); and every play starts at the first input, at
 the place in its band (just came down, at rest in the middle, just came up, or between) that
 fits the identification record best: a record that starts mid-stroke is not read as a jump from
 zero, and a rig that always starts its records the same way is predicted from that start.
 The thesis' exact setting is ``max_threshold=2.0, constraint="sum_to_one", fit_offset=False,
 start_state="zero"``.
 
-* ``constraint="nonneg"`` (default): ``Q >= 0`` (bounded-variable least squares).
+* ``constraint="auto"`` (default): the loop's orientation and curvature decided by the record:
+  ``nonneg`` or ``free``, whichever fitted on the head of the identification record(s)
+  predicts their last 30 % better (free weights must win by 10 %); ``constraint_`` says which.
+  A non-negative sum bends its branches one way only (steeper after a reversal, as behind a
+  backlash); a softening loop (Bouc-Wen, piezo stacks) or a mixed-sign play sum needs free
+  weights.
+* ``constraint="nonneg"``: ``Q >= 0`` (bounded-variable least squares).
 * ``constraint="sum_to_one"``: minimise ``||A Q - y||^2`` subject to ``sum(Q) = 1``.
   Eq. 4.10 writes the constraint as ``Q Q^T = 1``, but the text says it is the *sum* of the
   weights; we follow the text. The KKT system is solved exactly through the null space of the
@@ -53,6 +61,7 @@ from hysteresis.base import (
     as_1d,
     check_inverse_reach,
     check_records,
+    choose_form,
     register_family,
 )
 from hysteresis.play import (
@@ -64,6 +73,10 @@ from hysteresis.play import (
 )
 
 CONSTRAINTS = ("nonneg", "free", "sum_to_one")
+#: ``constraint="auto"``: the loop's orientation and curvature decided by the record.
+AUTO = "auto"
+#: The forms ``auto`` chooses between, the physical one first (see ``constraint``).
+AUTO_FORMS = ("nonneg", "free")
 INVERSE_METHODS = ("exact", "bounded")
 START_STATES = ("fit", "rest", "zero")
 #: Where in its band every play starts with ``start_state="fit"``: ``w = u0 - position p``
@@ -104,8 +117,12 @@ class GammaModel(StatefulModel):
     thresholds:
         Explicit thresholds (overrides the two above); non-negative, distinct.
     constraint:
-        ``"nonneg"`` (``Q >= 0``), ``"free"`` or ``"sum_to_one"`` (seed 001 eq. 4.10 as the
-        text means it).
+        ``"auto"`` (default): ``"nonneg"`` or ``"free"``, whichever fitted on the head of the
+        identification record(s) predicts their last 30 % better (``constraint_`` records
+        it; free weights must win by 10 %); ``"nonneg"`` (``Q >= 0``: branches that steepen
+        after a reversal, as behind a backlash), ``"free"`` (any sign: also branches that
+        flatten after a reversal, a softening loop, and mixed-sign play sums) or
+        ``"sum_to_one"`` (seed 001 eq. 4.10 as the text means it).
     fit_offset:
         Also fit a constant output offset (not in the thesis).
     start_state:
@@ -130,7 +147,7 @@ class GammaModel(StatefulModel):
         max_threshold: float | None = None,
         threshold_fraction: float | None = None,
         thresholds: list[float] | None = None,
-        constraint: str = "nonneg",
+        constraint: str = "auto",
         fit_offset: bool = True,
         start_state: str = "fit",
         inverse_method: str = "exact",
@@ -259,24 +276,30 @@ class GammaModel(StatefulModel):
         """Identify ``Q`` (and the offset) by exact (constrained) least squares, zero state."""
         if fit_params:
             raise HysteresisError(f"GammaModel.fit takes no extra arguments: {sorted(fit_params)}")
-        if self.constraint not in CONSTRAINTS:
+        if self.constraint not in (AUTO, *CONSTRAINTS):
             raise HysteresisError(
-                f"constraint must be one of {CONSTRAINTS}, got {self.constraint!r}"
+                f"constraint must be {AUTO!r} or one of {CONSTRAINTS}, got {self.constraint!r}"
             )
         recs = check_records(u, y)
-        sse, p, x, lam, pos = self._best_fit(recs)
+        constraint = str(self.constraint)
+        if constraint == AUTO:
+            params = self.get_params()
+            constraint, _ = choose_form(
+                lambda form: type(self)(**{**params, "constraint": form}), AUTO_FORMS, recs)
+        sse, p, x, lam, pos = self._best_fit(recs, constraint)
         n = p.size
         self.start_position_ = pos
         self.thresholds_ = p
         self.weights_ = np.ascontiguousarray(x[:n])
         self.offset_ = float(x[n]) if self.fit_offset else 0.0
         self.lagrange_multiplier_ = lam
+        self.constraint_ = constraint
         self.sse_ = sse
         self.n_samples_ = int(recs.u.size)
         self.input_span_ = float(np.ptp(recs.u))
         return self
 
-    def _best_fit(self, recs: Records
+    def _best_fit(self, recs: Records, constraint: str
                   ) -> tuple[float, FloatArray, FloatArray, float, float]:
         """(SSE, thresholds, solution, multiplier, start position) of the best candidate.
 
@@ -289,9 +312,9 @@ class GammaModel(StatefulModel):
         own start. Candidates are compared on the QR-reduced problem (a k x k least squares
         with the same minimiser); the chosen one is solved on the full record.
         """
-        p, pos = self._choose_setup(recs)
+        p, pos = self._choose_setup(recs, constraint)
         plays = self._plays(recs, p, pos)
-        x, lam = self._solve(plays, recs.y)
+        x, lam = self._solve(plays, recs.y, constraint)
         resid = self._design(plays) @ x - recs.y
         return float(resid @ resid), p, x, lam, pos
 
@@ -302,16 +325,18 @@ class GammaModel(StatefulModel):
                 for uu, _ in recs.pairs()]
         return mats[0] if len(mats) == 1 else np.vstack(mats)
 
-    def _choose_setup(self, recs: Records) -> tuple[FloatArray, float]:
+    def _choose_setup(self, recs: Records,
+                      constraint: str | None = None) -> tuple[FloatArray, float]:
         """(thresholds, start position) of the best candidate, screened on the QR-reduced
         problem (see :meth:`_best_fit`); no solve on the full record."""
+        constraint = constraint or self._resolved_constraint()
         spans = self._threshold_candidates(recs.u)
         positions = self._positions()
         if len(spans) == 1 and len(positions) == 1:
             return spans[0], positions[0]
         screened: list[tuple[float, int, float]] = []
         for i, c in enumerate(spans):
-            scores = [self._screen(recs, c, pos) for pos in positions]
+            scores = [self._screen(recs, c, pos, constraint) for pos in positions]
             k = int(np.argmin(scores))
             if scores[k] > (1.0 - START_GAIN) * scores[0]:
                 k = 0
@@ -319,7 +344,15 @@ class GammaModel(StatefulModel):
         _, i, pos = min(screened)
         return spans[i], pos
 
-    def _screen(self, recs: Records, p: FloatArray, pos: float) -> float:
+    def _resolved_constraint(self) -> str:
+        """The constraint in force: the fitted one, else the setting (``auto`` screens as
+        its physical form until a fit decides)."""
+        fitted = getattr(self, "constraint_", None)
+        if fitted is not None:
+            return str(fitted)
+        return AUTO_FORMS[0] if self.constraint == AUTO else str(self.constraint)
+
+    def _screen(self, recs: Records, p: FloatArray, pos: float, constraint: str) -> float:
         """Squared error of the candidate (thresholds ``p``, start ``pos``), through the QR
         reduction: ``||A x - y||^2 = ||R x - Q^T y||^2 + ||y||^2 - ||Q^T y||^2``."""
         yy = recs.y
@@ -334,7 +367,7 @@ class GammaModel(StatefulModel):
                 qty = q.T @ yy
         x, _ = solve_play_weights(np.asarray(r, dtype=np.float64),
                                   np.asarray(qty, dtype=np.float64), n_weights=p.size,
-                                  constraint=self.constraint)
+                                  constraint=constraint)
         rest = float(yy @ yy - qty @ qty)
         e = r @ x - qty
         return float(e @ e) + max(rest, 0.0)
@@ -343,13 +376,14 @@ class GammaModel(StatefulModel):
         a = np.asarray(plays)
         return np.column_stack([a, np.ones(a.shape[0])]) if self.fit_offset else a
 
-    def _solve(self, plays: Any, yy: FloatArray) -> tuple[FloatArray, float]:
+    def _solve(self, plays: Any, yy: FloatArray,
+               constraint: str | None = None) -> tuple[FloatArray, float]:
         """Exact (constrained) least squares for ``Q`` (and the offset) on one play matrix."""
         a = self._design(plays)
         if a.shape[0] < a.shape[1]:
             raise HysteresisError(f"need at least {a.shape[1]} samples to fit, got {a.shape[0]}")
         return solve_play_weights(a, yy, n_weights=np.asarray(plays).shape[1],
-                                  constraint=self.constraint)
+                                  constraint=constraint or self._resolved_constraint())
 
     # -- simulation -------------------------------------------------------------------
     def initial_state(self, u0: float = 0.0) -> GammaState:

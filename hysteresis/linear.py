@@ -13,6 +13,7 @@ from hysteresis.base import (
     StatefulModel,
     as_1d,
     check_records,
+    choose_form,
     records_sse,
     register_family,
 )
@@ -39,10 +40,14 @@ class LinearModel(StatefulModel):
         Fixed delay in samples; ``None``: searched (see ``max_delay``).
     max_delay:
         With ``delay=None``, ``fit`` picks the delay in ``0..max_delay`` with the smallest mean
-        squared error; ``None``: up to twice the lag at which the output's velocity
-        correlates best with the input's, at most a quarter of the record
-        (:func:`hysteresis.lag.delay_search_max`): a lag of seconds on a compliant drive is
-        found without knowing the sample rate, and a record with no lag keeps ``delay_ = 0``.
+        squared error among those that keep the gain's sign without delay (half a period of
+        lag with the gain reversed also fits a softening loop's phase), and keeps it only where
+        it predicts the last 30 % of the record better than no delay; ``None``: up to twice
+        the lag at which the output's velocity correlates best with the input's, at most a
+        quarter of the record (:func:`hysteresis.lag.delay_search_max`) and a quarter of the
+        input's period (on a periodic record a longer lag cannot be told from a loop's
+        phase): a lag of seconds on a compliant drive is found without knowing the sample
+        rate, and a record with no lag keeps ``delay_ = 0``.
     """
 
     def __init__(self, *, delay: int | None = None, max_delay: int | None = None) -> None:
@@ -65,25 +70,16 @@ class LinearModel(StatefulModel):
         else:
             top = self.max_delay
             if top is None:
-                top = min(int(np.floor(delay_search_max(uu, yy, 1.0))) for uu, yy in pairs)
+                top = min(min(int(np.floor(delay_search_max(uu, yy, 1.0))),
+                              _quarter_period(uu)) for uu, yy in pairs)
             delays = range(int(top) + 1)
-        best: tuple[float, int, float, float] | None = None
-        for d in delays:
-            # every record delayed on its own: no sample of one explains another's
-            usable = [(uu[: uu.size - d], yy[d:]) for uu, yy in pairs if uu.size - d >= 1]
-            if sum(x.size for x, _ in usable) < 2 or len(usable) < len(pairs):
-                break
-            x = np.concatenate([x for x, _ in usable])
-            t = np.concatenate([t for _, t in usable])
-            a = np.column_stack([x, np.ones(x.size)])
-            coef, *_ = np.linalg.lstsq(a, t, rcond=None)
-            # compare delays on the mean squared error over the samples each one explains
-            mse = float(np.mean((a @ coef - t) ** 2))
-            if best is None or mse < best[0]:
-                best = (mse, d, float(coef[0]), float(coef[1]))
-        if best is None:
-            raise HysteresisError(f"too few samples ({recs.u.size}) for delay {self.delay}")
-        _, d, gain, off = best
+        _, d, gain, off = _best_delay(pairs, delays, recs.u.size, self.delay)
+        if self.delay is None and d > 0:
+            # the searched delay is kept only where it predicts a held-out part of the record
+            # better than none (a loop's phase also reads as a lag, and extrapolates badly)
+            kept, _ = choose_form(lambda k: type(self)(delay=k), (d, 0), recs)
+            if kept == 0:
+                _, d, gain, off = _best_delay(pairs, [0], recs.u.size, 0)
         self.gain_ = gain
         self.offset_ = off
         self.delay_ = int(d)
@@ -146,3 +142,46 @@ class LinearModel(StatefulModel):
         st = self._state(state, v)
         hist = np.concatenate([st.history, [v]])[1:] if self.delay_ else st.history
         return v, LinearState(hist)
+
+
+def _best_delay(pairs: list[tuple[FloatArray, FloatArray]], delays: range | list[int],
+                n: int, asked: int | None) -> tuple[float, int, float, float]:
+    """(MSE, delay, gain, offset) of the delay in ``delays`` with the smallest mean squared
+    error over the samples it explains, every record delayed on its own."""
+    best: tuple[float, int, float, float] | None = None
+    sign0 = 0.0  # the gain's sign without delay: a delay may not flip it
+    for d in delays:
+        # every record delayed on its own: no sample of one explains another's
+        usable = [(uu[: uu.size - d], yy[d:]) for uu, yy in pairs if uu.size - d >= 1]
+        if sum(x.size for x, _ in usable) < 2 or len(usable) < len(pairs):
+            break
+        x = np.concatenate([x for x, _ in usable])
+        t = np.concatenate([t for _, t in usable])
+        a = np.column_stack([x, np.ones(x.size)])
+        coef, *_ = np.linalg.lstsq(a, t, rcond=None)
+        mse = float(np.mean((a @ coef - t) ** 2))
+        if best is None:
+            sign0 = float(np.sign(coef[0]))
+        elif float(np.sign(coef[0])) * sign0 < 0:
+            # half a period of lag with the gain reversed also fits a loop in the MSE, but
+            # predicts nothing the record did not show
+            continue
+        if best is None or mse < best[0]:
+            best = (mse, d, float(coef[0]), float(coef[1]))
+    if best is None:
+        raise HysteresisError(f"too few samples ({n}) for delay {asked}")
+    return best
+
+
+def _quarter_period(u: FloatArray) -> int:
+    """A quarter of the input's typical period, in samples: half the median spacing of its
+    reversals (no cap when the input reverses fewer than three times)."""
+    du = np.diff(u)
+    moving = np.flatnonzero(du != 0)
+    if moving.size < 2:
+        return u.size
+    sign = np.sign(du[moving])
+    turns = moving[1:][sign[1:] != sign[:-1]]
+    if turns.size < 3:
+        return u.size
+    return max(1, int(np.median(np.diff(turns)) // 2))

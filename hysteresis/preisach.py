@@ -43,9 +43,11 @@ from hysteresis._blas import single_thread_blas
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
+    Records,
     StatefulModel,
     as_1d,
     check_records,
+    choose_form,
     records_sse,
     register_family,
 )
@@ -58,6 +60,7 @@ from hysteresis.play import (
 )
 
 DENSITIES = ("gauss_gauss", "lorentzian", "lognormal_gauss", "nonparametric")
+DENSITY_SIGNS = ("auto", "positive", "negative")
 PARAM_NAMES = ("N", "H0", "sigma", "centre")
 
 
@@ -125,6 +128,12 @@ class PreisachModel(StatefulModel):
         ``False`` the density is exactly the paper's (one width ``sigma H0`` for both axes).
     reversible:
         Add a reversible linear term ``gain * u`` (``gain >= 0``) to the relay sum.
+    density_sign:
+        ``"positive"``: ``mu >= 0``, the classical plane, whose branches steepen after a
+        reversal (a backlash-like loop); ``"negative"``: ``mu <= 0`` below the reversible
+        gain, branches that flatten after a reversal (a softening, Bouc-Wen-like loop);
+        ``"auto"`` (default): the one whose fit on the head of the identification record(s)
+        predicts their last 30 % better (``density_sign_`` records it).
     """
 
     def __init__(
@@ -139,6 +148,7 @@ class PreisachModel(StatefulModel):
         inverse_xtol: float = 1e-10,
         free_spread: bool = True,
         reversible: bool = True,
+        density_sign: str = "auto",
     ) -> None:
         self.density = density
         self.n_levels = n_levels
@@ -149,6 +159,7 @@ class PreisachModel(StatefulModel):
         self.inverse_xtol = inverse_xtol
         self.free_spread = free_spread
         self.reversible = reversible
+        self.density_sign = density_sign
 
     # -- the plane --------------------------------------------------------------------
     def _check_hyper(self) -> None:
@@ -160,6 +171,9 @@ class PreisachModel(StatefulModel):
             raise HysteresisError(f"margin must be >= 0, got {self.margin}")
         if int(self.fit_every) < 1:
             raise HysteresisError(f"fit_every must be >= 1, got {self.fit_every}")
+        if self.density_sign not in DENSITY_SIGNS:
+            raise HysteresisError(
+                f"density_sign must be one of {DENSITY_SIGNS}, got {self.density_sign!r}")
 
     def _set_plane(self, u: FloatArray) -> None:
         lo, hi = float(u.min()), float(u.max())
@@ -213,6 +227,17 @@ class PreisachModel(StatefulModel):
             raise HysteresisError(f"PreisachModel.fit takes no extra args: {sorted(fit_params)}")
         self._check_hyper()
         recs = check_records(u, y)
+        sign = self.density_sign
+        if sign == "auto":
+            params = self.get_params()
+            sign, _ = choose_form(
+                lambda form: type(self)(**{**params, "density_sign": form}),
+                ("positive", "negative"), recs)
+        self._fit_form(recs, str(self.density), str(sign))
+        return self
+
+    def _fit_form(self, recs: Records, density: str, sign: str) -> None:
+        """Identify the plane on ``recs`` with the density's kind and sign fixed."""
         self._set_plane(recs.u)
         every = int(self.fit_every)
         blocks = []
@@ -225,30 +250,37 @@ class PreisachModel(StatefulModel):
         u_rows = np.concatenate([uu[::every] for uu, _ in recs.pairs()])
         # Small dense algebra: BLAS threads only add contention (the pipeline already fits
         # configurations in parallel), so identification runs single-threaded.
+        sgn = 1.0 if sign == "positive" else -1.0
         with single_thread_blas():
-            if self.density == "nonparametric":
-                self._fit_nonparametric(rows, target, u_rows)
+            if density == "nonparametric":
+                self._fit_nonparametric(rows, target, u_rows, sgn)
             else:
-                self._fit_parametric(rows, target, recs.u, u_rows)
+                self._fit_parametric(rows, target, recs.u, u_rows, sgn, density)
+        self.density_sign_ = sign
+        if sgn < 0 and not self._rises(recs):
+            # a negative plane below a small reversible gain fits an output that falls with
+            # the input: a sign flip, not a loop; only the positive form may say so
+            raise HysteresisError("no negative density with a rising outer slope fits the "
+                                  "data (is the output decreasing in the input?)")
         self.sse_ = records_sse(self, recs)
         self.n_samples_ = int(recs.u.size)
-        return self
 
-    def _fit_nonparametric(self, rows: FloatArray, target: FloatArray, u_rows: FloatArray) -> None:
+    def _fit_nonparametric(self, rows: FloatArray, target: FloatArray, u_rows: FloatArray,
+                           sgn: float = 1.0) -> None:
         ones = np.ones((rows.shape[0], 1))
         # the offset may have either sign: two non-negative columns +1 and -1
-        cols = [rows, ones, -ones]
+        cols = [sgn * rows, ones, -ones]
         if self.reversible:
             cols.append(u_rows.reshape(-1, 1))
         x, _ = nnls(np.hstack(cols), target, maxiter=50 * rows.shape[1])
         k = rows.shape[1]
-        self.cell_weights_ = np.ascontiguousarray(x[:k])
+        self.cell_weights_ = np.ascontiguousarray(sgn * x[:k])
         self.offset_ = float(x[k] - x[k + 1])
         self.reversible_gain_ = float(x[k + 2]) if self.reversible else 0.0
         self.density_params_ = np.zeros(0)
 
     def _fit_parametric(self, rows: FloatArray, target: FloatArray, u: FloatArray,
-                        u_rows: FloatArray) -> None:
+                        u_rows: FloatArray, sgn: float, density: str) -> None:
         # x = (N, H0, sigma, centre, kappa, offset, gain); N, offset, gain enter linearly.
         half = 0.5 * float(u.max() - u.min())
         centre0 = 0.5 * float(u.max() + u.min())
@@ -261,12 +293,12 @@ class PreisachModel(StatefulModel):
         raug = scipy_qr(aug, mode="r", overwrite_a=True, check_finite=False)[0]
         rmat, qt = raug[: k + 2, : k + 2], raug[: k + 2, k + 2]
         r_cells, r_off, r_gain = rmat[:, :k], rmat[:, k], rmat[:, k + 1]
-        spread_free = self.free_spread and self.density != "lorentzian"
+        spread_free = self.free_spread and density != "lorentzian"
         rev = bool(self.reversible)
 
         def linear_part(x: FloatArray) -> tuple[FloatArray, FloatArray]:
             """Variable projection: best (N >= 0, offset, gain >= 0) for the shape in ``x``."""
-            cols = [r_cells @ self._shape(x), r_off, -r_off]  # offset of either sign
+            cols = [sgn * (r_cells @ self._shape(x)), r_off, -r_off]  # offset of either sign
             if rev:
                 cols.append(r_gain)
             a = np.column_stack(cols)
@@ -317,7 +349,7 @@ class PreisachModel(StatefulModel):
         )
         x = unpack(res.x)
         coef, _ = linear_part(x)
-        x[0] = coef[0]
+        x[0] = sgn * coef[0]
         if spread_free and x[4] == 0.0:
             x[3] = centre0  # uniform along alpha + beta: the centre has no effect; report the mid
 
@@ -326,6 +358,12 @@ class PreisachModel(StatefulModel):
         self.offset_ = float(coef[1])
         self.reversible_gain_ = float(coef[2])
         self.n_fev_ = int(res.nfev)
+
+    def _rises(self, recs: Records) -> bool:
+        """Whether the fitted plane's output rises with the input over the records."""
+        pred = np.concatenate([self.predict(uu) for uu, _ in recs.pairs()])
+        return bool(np.isfinite(pred).all() and np.ptp(recs.u) > 0
+                    and np.corrcoef(recs.u, pred)[0, 1] > 0)
 
     # -- simulation -------------------------------------------------------------------
     def predict(self, u: Any, *, state: Any = None, return_state: bool = False) -> Any:

@@ -494,7 +494,7 @@ class ComposedModel:
             phi = self._features(run, yb, coef)
             full = np.column_stack([a, phi])
             x, _ = solve_play_weights(full, run.y, n_weights=n_w,
-                                      constraint=str(getattr(base, "constraint", "free")))
+                                      constraint=_weight_constraint(base))
             yb = a @ x[: a.shape[1]]
             coef = x[a.shape[1]:]
         self.base_ = base
@@ -630,7 +630,7 @@ def _joint_linear(base: HysteresisModel, u: FloatArray, y: FloatArray,
         a = np.column_stack([a, np.ones(u.size)])
     full = np.column_stack([a, phi])
     x, _ = solve_play_weights(full, y, n_weights=n_w,
-                              constraint=str(getattr(base, "constraint", "free")))
+                              constraint=_weight_constraint(base))
     return np.asarray(x[a.shape[1]:], dtype=np.float64)
 
 
@@ -830,3 +830,12 @@ def fit_joint(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect, 
     reordered = ComposedModel(base_factory, [*first.terms[1:], first.terms[0]],
                               iterations=iterations).fit(ident)
     return reordered if _sse(reordered, ident) < _sse(on_top, ident) else on_top
+
+
+def _weight_constraint(base: Any) -> str:
+    """The constraint a play-sum base's weights were (or will be) solved under: the one its
+    fit chose (``constraint_``), else its setting (``auto`` solves as its physical form)."""
+    resolved = getattr(base, "_resolved_constraint", None)
+    if callable(resolved):
+        return str(resolved())
+    return str(getattr(base, "constraint", "free"))

@@ -625,6 +625,10 @@ BASE_DEFAULTS: dict[str, dict[str, Any]] = {
     "gamma": {"constraint": "sum_to_one", "fit_offset": False, "start_state": "zero",
               "threshold_fraction": 1.0 / 6.0},
     "linear": {"delay": 0},  # a searched delay would take up the latency looked for
+    # the base keeps its physical loop form: the workflow's effects are what bend it, and a
+    # form chosen per source would change with the effect hidden in it
+    "preisach": {"density_sign": "positive"},
+    "coleman_hodgdon": {"b_sign": "negative"},
 }
 
 #: Bases identified in closed form (a least-squares solve): fast enough to search an effect's

@@ -83,14 +83,17 @@ def test_recovery_with_noise_and_other_parameters() -> None:
 
 def test_sign_constraint_and_free_variant() -> None:
     """A true backlash (flat reversal, B = C/2 > 0) needs b_sign='free'; the paper's B < 0
-    is kept by default and fits worse."""
+    fits worse, and the default (auto) sees it on the record's held-out part."""
     u = _paper_triangle(3, dt=0.1)
     y = ch_simulate(u, 3.0, 1.0, 2.0, origin=(3.0, 0.0))
-    paper = ColemanHodgdonModel().fit(u, y)
+    paper = ColemanHodgdonModel(b_sign="negative").fit(u, y)
     free = ColemanHodgdonModel(b_sign="free").fit(u, y)
-    assert paper.B_ < 0
+    auto = ColemanHodgdonModel().fit(u, y)
+    assert paper.B_ < 0 and paper.b_sign_ == "negative"
     np.testing.assert_allclose(free.params_, [3.0, 1.0, 2.0], rtol=1e-5)
     assert free.sse_ / free.n_samples_ < 1e-10 < paper.sse_ / paper.n_samples_
+    assert auto.b_sign_ == "free"
+    np.testing.assert_allclose(auto.params_, free.params_, rtol=1e-9)
 
 
 def test_fit_is_scale_robust() -> None:

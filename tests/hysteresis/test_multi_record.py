@@ -73,7 +73,7 @@ def test_gamma_joint_fit_is_the_least_squares_of_the_stacked_own_start_designs(r
     record's own play matrix (each started by the fitted start rule at its first input)."""
     pairs = runs["play_sum"]
     us, ys = [u for u, _ in pairs], [y for _, y in pairs]
-    model = make_family("gamma").fit(us, ys)
+    model = make_family("gamma", constraint="nonneg").fit(us, ys)
     design = np.vstack([np.column_stack([model.design_matrix(u), np.ones(u.size)]) for u in us])
     n = model.weights_.size
     lower = np.r_[np.zeros(n), -np.inf]
