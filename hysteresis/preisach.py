@@ -235,7 +235,8 @@ class PreisachModel(StatefulModel):
             cols.append(u_rows.reshape(-1, 1))
         x, _ = nnls(np.hstack(cols), target, maxiter=50 * rows.shape[1])
         k = rows.shape[1]
-        self.cell_weights_ = np.ascontiguousarray(x[:k])
+        # nnls keeps the weights >= 0; the clip makes that hold whatever a BLAS kernel rounds
+        self.cell_weights_ = np.ascontiguousarray(np.maximum(x[:k], 0.0))
         self.offset_ = float(x[k] - x[k + 1])
         self.reversible_gain_ = float(x[k + 2]) if self.reversible else 0.0
         self.density_params_ = np.zeros(0)
