@@ -374,6 +374,32 @@ def store_lock(settings: TrackingSettings) -> Iterator[None]:
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
+@contextlib.contextmanager
+def key_lock(settings: TrackingSettings, key: str) -> Iterator[None]:
+    """Exclusive lock for one key (a registered model's name) among the processes using a
+    local SQLite store: ``flock`` on ``mlflow.db.locks/<hash of key>.lock`` beside the store,
+    so a check and the write it decides (the champion alias, a new version) are one step for
+    every process. Other keys are not held up. Nothing for a server store, whose callers
+    create if absent instead."""
+    uri = settings.tracking_uri
+    if not uri.startswith("sqlite:///"):
+        yield
+        return
+    import fcntl
+    import hashlib
+
+    db = Path(uri[len("sqlite:///"):])
+    folder = db.with_name(db.name + ".locks")
+    folder.mkdir(parents=True, exist_ok=True)
+    name = hashlib.sha256(key.encode("utf-8")).hexdigest()[:24]  # no data in a file name
+    with open(folder / f"{name}.lock", "a+b") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
 def end_dead_runs(tracker: Tracker) -> list[str]:
     """End as FAILED every RUNNING run whose owner process (tags :data:`HOST_TAG`,
     :data:`PID_TAG`) ran on this host and is gone; return their ids. Runs of other hosts,
