@@ -157,8 +157,12 @@ def load_models(models_dir: Path) -> pd.DataFrame:
         if record.get("format") != MODEL_FILE_FORMAT:
             continue
         model = record.pop("model", None)
-        stored = record.get("model_sha256")  # absent in files written before it existed
-        if stored is not None and stored != cache.hash_json(model):  # damaged/edited: refit
+        stored = record.get("model_sha256")
+        if stored is None:  # an older file, or an edit that dropped the hash: refit
+            log.warning("ignoring model file %s: it records no model_sha256, so its model "
+                        "cannot be checked (fit writes it again)", path)
+            continue
+        if stored != cache.hash_json(model):  # damaged or edited: refit
             log.warning("ignoring model file %s: content does not match its hash", path)
             continue
         row = {c: record.get(c) for c in stages.FIT_COLUMNS}
