@@ -24,7 +24,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipelines import schemas, stages
+from pipelines import cache, schemas, stages
 from pipelines.common import (
     Paths,
     dataset_hash,
@@ -47,7 +47,16 @@ def prediction_path(predictions_dir: Path, config: Configuration) -> Path:
 
 
 def read_prediction_meta(path: Path) -> dict[str, Any] | None:
-    """The cache record stored in a predictions file's parquet metadata (None if absent)."""
+    """The cache record stored in a predictions file's parquet metadata; None when absent
+    or when the file's bytes no longer have the SHA-256 recorded beside it (damaged pages
+    under an intact footer would otherwise pass for up to date)."""
+    if not path.exists():
+        return None
+    if not cache.digest_matches(path):
+        log.warning("predictions file %s does not match its recorded SHA-256 (damaged, edited "
+                    "or written before hashes were recorded): not reused; validate rewrites it",
+                    path)
+        return None
     try:
         meta = pq.read_schema(path).metadata or {}
     except (OSError, pa.ArrowException):
@@ -64,6 +73,8 @@ def write_predictions(path: Path, preds: pd.DataFrame, record: Mapping[str, Any]
     table = table.replace_schema_metadata(meta)
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp, compression="zstd")
+        digest = cache.sha256_file(tmp)
+    cache.write_digest(path, digest)
 
 
 def validate_configuration(
@@ -197,8 +208,6 @@ def _run_tasks(todo: Sequence[tuple[pd.DataFrame, dict[str, list[RunSignal]], st
 
 def write_metrics(metrics: pd.DataFrame, paths: Paths) -> None:
     """``metrics.parquet`` and ``metrics.csv``, atomically, only when the content changed."""
-    from pipelines import cache
-
     new_hash = cache.hash_frame(metrics)
     if paths.metrics_parquet.exists() and paths.metrics_csv.exists():
         try:
