@@ -31,6 +31,7 @@ from pipelines.common import (
     hydra_sweep_dir,
     identification_plan,
     read_processed,
+    run_stage,
     to_container,
 )
 from pipelines.stages import FamilySpec, FitTask, PipelineError
@@ -282,10 +283,12 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
-    dataset = read_processed(paths.processed)
-    fits = run(plain, dataset=dataset)
     settings = tracking.settings_from_config(plain["tracking"], root=paths.root)
     tracker = tracking.Tracker(settings)
+    if tracker.enabled:
+        tracker.init_store()  # a locked or damaged store stops the stage before the fits
+    dataset = read_processed(paths.processed)
+    fits = run(plain, dataset=dataset)
     if tracker.enabled:
         with tracking.StageRun(tracker, "fit", sweep_dir=hydra_sweep_dir()) as stage_run:
             assert stage_run.parent_id is not None
@@ -311,7 +314,7 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
 @hydra.main(config_path="../conf", config_name="fit", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    run_stage("fit", lambda: main_cfg(cfg))
 
 
 if __name__ == "__main__":

@@ -32,6 +32,7 @@ from pipelines.common import (
     dataset_hash,
     hydra_output_dir,
     hydra_sweep_dir,
+    run_stage,
     to_container,
 )
 from pipelines.fit import load_models
@@ -516,7 +517,7 @@ def log_report(tracker: Any, run_id: str, result: ReportResult) -> None:
 
 @hydra.main(config_path="../conf", config_name="report", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    run_stage("report", lambda: main_cfg(cfg))
 
 
 if __name__ == "__main__":

@@ -32,6 +32,7 @@ from pipelines.common import (
     hydra_sweep_dir,
     identification_plan,
     read_processed,
+    run_stage,
     to_container,
 )
 from pipelines.fit import load_models
@@ -227,9 +228,11 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
-    metrics, errors = run(plain)
     tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
                                                              root=paths.root))
+    if tracker.enabled:
+        tracker.init_store()  # a locked or damaged store stops the stage before the work
+    metrics, errors = run(plain)
     if tracker.enabled:
         with tracking.StageRun(tracker, "validate", sweep_dir=hydra_sweep_dir()) as stage_run:
             assert stage_run.parent_id is not None
@@ -251,7 +254,7 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
 @hydra.main(config_path="../conf", config_name="validate", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    run_stage("validate", lambda: main_cfg(cfg))
 
 
 if __name__ == "__main__":
