@@ -382,16 +382,25 @@ def plan_fits(
     marked: frozenset[str] = frozenset(),
     input_col: str = "input",
     output_col: str = "output",
+    max_samples: int | None = None,
 ) -> list[FitTask]:
     """One task per family x configuration x identification excitation present in the data.
 
     Which run identifies (see :func:`identification_run`): the one run of the excitation in
     the configuration, or the one named in ``fit_runs``; never a silent pick among several.
+
+    An identification run longer than ``max_samples`` stops the stage before anything is
+    fitted, naming the run, its size and the setting. It is not decimated here: the linear
+    model's delay counts samples and Coleman-Hodgdon's Euler scheme steps once per sample,
+    while validate scores every model on the recorded runs at their own rate.
     """
     check_dataset(dataset, signals=(input_col, output_col))
     if not families:
         raise PipelineError("no model family selected")
+    if max_samples is not None and max_samples < 2:
+        raise PipelineError(f"max_samples must be at least 2, got {max_samples}")
     chosen = set(map(str, fit_runs))
+    too_long: list[str] = []
     tasks: list[FitTask] = []
     for config in configs:
         by_kind = run_signals(config_rows(dataset, config), input_col=input_col,
@@ -411,6 +420,9 @@ def plan_fits(
             why = ("its manifest role is identify" if run.run_id in own else
                    "named in fit_runs" if run.run_id in chosen else f"its only {kind} run")
             log.info("fit: %s identifies on %s (%s)", config.label, run.run_id, why)
+            if max_samples is not None and run.u.size > max_samples:
+                too_long.append(f"{config.label}: run {run.run_id} has {run.u.size} samples")
+                continue
             for fam in families:
                 key = cache.combine({
                     "stage": "fit", "family": fam.name, "config": dict(fam.config),
@@ -418,6 +430,14 @@ def plan_fits(
                     "signals": [input_col, output_col],
                 })
                 tasks.append(FitTask(fam, config, kind, (run,), key))
+    if too_long:
+        shown = "; ".join(too_long[:5]) + (f"; and {len(too_long) - 5} more"
+                                           if len(too_long) > 5 else "")
+        raise PipelineError(
+            f"identification run(s) beyond the per-run limit of the fit, max_samples="
+            f"{max_samples}: {shown}. Nothing was fitted. Raise max_samples (memory and time "
+            "grow with it), or identify on a shorter or resampled record (fit_runs=[...], or "
+            "a lower rate at the rig or in the importer)")
     if not tasks:
         raise PipelineError(
             f"nothing to fit: no run of excitation(s) {list(fit_excitations)} in the "
