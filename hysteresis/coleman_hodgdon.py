@@ -348,8 +348,10 @@ class ColemanHodgdonModel(StatefulModel):
             if not np.all(np.isfinite(basis)):
                 return math.inf, np.zeros(3)
             res = lsq_linear(basis, yn, bounds=(lb, ub), method="bvls")
-            r = basis @ res.x - yn
-            return float(r @ r) / un.size, np.asarray(res.x, dtype=np.float64)
+            # an active bound can come back a rounding error outside it: clip to the bounds
+            x = np.clip(np.asarray(res.x, dtype=np.float64), lb, ub)
+            r = basis @ x - yn
+            return float(r @ r) / un.size, x
 
         grid = np.linspace(-1.5, 2.5, 33)
         vals = [solve(float(g))[0] for g in grid]

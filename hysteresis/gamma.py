@@ -541,7 +541,11 @@ def solve_play_weights(a: FloatArray, y: FloatArray, *, n_weights: int,
                 q, r = np.linalg.qr(a)
                 a, y = r, q.T @ y
             res = lsq_linear(a, y, bounds=(lower, np.inf), method="bvls")
-            return np.asarray(res.x, dtype=np.float64), float("nan")
+            # BVLS may leave an active bound a rounding error outside (-3.5e-18 with one
+            # OpenBLAS kernel, 0.0 with another): the weights must satisfy Q >= 0 exactly.
+            sol = np.asarray(res.x, dtype=np.float64).copy()
+            sol[:n_weights] = np.maximum(sol[:n_weights], 0.0)
+            return np.asarray(sol, dtype=np.float64), float("nan")
         c = np.zeros(a.shape[1])
         c[:n_weights] = 1.0  # the sum of the weights (other columns unconstrained)
         return constrained_lstsq(a, y, c, 1.0)

@@ -274,7 +274,9 @@ class PreisachModel(StatefulModel):
             cols.append(u_rows.reshape(-1, 1))
         x, _ = nnls(np.hstack(cols), target, maxiter=50 * rows.shape[1])
         k = rows.shape[1]
-        self.cell_weights_ = np.ascontiguousarray(sgn * x[:k])
+        # nnls keeps the magnitudes >= 0; the clip makes that hold whatever a BLAS kernel
+        # rounds, and the sign is the form's
+        self.cell_weights_ = np.ascontiguousarray(sgn * np.maximum(x[:k], 0.0))
         self.offset_ = float(x[k] - x[k + 1])
         self.reversible_gain_ = float(x[k + 2]) if self.reversible else 0.0
         self.density_params_ = np.zeros(0)

@@ -155,6 +155,45 @@ def files_intact(digests: Mapping[str, str]) -> bool:
         return False
 
 
+#: Suffix of the side-car file holding the SHA-256 of a cached file's bytes.
+DIGEST_SUFFIX = ".sha256"
+
+
+def sha256_file(path: Path) -> str:
+    """Full hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with Path(path).open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def digest_path(path: Path) -> Path:
+    """``<file>.sha256``, beside the file it vouches for."""
+    path = Path(path)
+    return path.with_name(path.name + DIGEST_SUFFIX)
+
+
+def write_digest(path: Path, digest: str) -> Path:
+    """Record ``digest`` (of ``path``'s bytes, as just written) in its side-car, atomically.
+    Written after the file itself: a crash in between leaves a side-car that does not match,
+    and the file is recomputed."""
+    from rig_io.atomic import write_text_atomic
+
+    return write_text_atomic(digest_path(path), f"{digest}\n")
+
+
+def digest_matches(path: Path) -> bool:
+    """True only when ``path`` exists and its bytes have the SHA-256 its side-car records.
+    A file without a side-car (written before it existed) is not trusted either: a file whose
+    footer survives while its pages do not would still look readable."""
+    try:
+        recorded = digest_path(path).read_text(encoding="utf-8").strip()
+        return bool(recorded) and Path(path).is_file() and sha256_file(path) == recorded
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
 @lru_cache(maxsize=64)
 def source_hash(cls: type) -> str:
     """Hash of the code a model family runs: the module defining ``cls`` and every module

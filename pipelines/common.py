@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+import sys
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pandas as pd
 
@@ -17,6 +18,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 CONF_DIR = REPO_ROOT / "conf"
 #: Environment variable holding the id of the current Hydra sweep (its folder's suffix).
 SWEEP_ID_ENV = "TSM_SWEEP_ID"
+T = TypeVar("T")
 
 
 def sweep_id() -> str:
@@ -68,6 +70,22 @@ def exit_with_parent(parent_pid: int, *, poll_s: float = 0.5) -> None:
         os._exit(1)
 
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+def run_stage(stage: str, entry: Callable[[], T]) -> T:
+    """A stage's Hydra entry point: a :class:`PipelineError` (a store that cannot be opened,
+    nothing to fit ...) or a :class:`~rig_io.errors.RigIOError` (an unreadable dataset or
+    run index) ends it with one line on stderr and exit status 2 instead of a traceback.
+    Inside a sweep job the error propagates, so the launcher records the job as failed."""
+    from rig_io.errors import RigIOError
+
+    try:
+        return entry()
+    except (PipelineError, RigIOError) as err:
+        if hydra_sweep_dir() is not None:
+            raise
+        print(f"{stage}: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from pipelines.common import (
     hydra_sweep_dir,
     identification_plan,
     read_processed,
+    run_stage,
     to_container,
 )
 from pipelines.stages import FamilySpec, FitTask, PipelineError
@@ -157,8 +158,12 @@ def load_models(models_dir: Path) -> pd.DataFrame:
         if record.get("format") != MODEL_FILE_FORMAT:
             continue
         model = record.pop("model", None)
-        stored = record.get("model_sha256")  # absent in files written before it existed
-        if stored is not None and stored != cache.hash_json(model):  # damaged/edited: refit
+        stored = record.get("model_sha256")
+        if stored is None:  # an older file, or an edit that dropped the hash: refit
+            log.warning("ignoring model file %s: it records no model_sha256, so its model "
+                        "cannot be checked (fit writes it again)", path)
+            continue
+        if stored != cache.hash_json(model):  # damaged or edited: refit
             log.warning("ignoring model file %s: content does not match its hash", path)
             continue
         row = {c: record.get(c) for c in stages.FIT_COLUMNS}
@@ -181,18 +186,28 @@ def _plain(value: Any) -> Any:
 # --------------------------------------------------------------------------------------
 
 
+#: Identification runs from this many samples on are announced before fitting: each such
+#: fit takes minutes rather than seconds.
+LARGE_RUN = 200_000
+
+
 def joblib_runner(n_jobs: int, *, progress: bool) -> Callable[..., list[dict[str, Any]]]:
-    """Map ``fit_task`` over tasks with joblib processes (a tqdm bar as results come back)."""
+    """Map ``fit_task`` over tasks with joblib processes (a tqdm bar as results come back).
+
+    Each finished fit is logged with its time and the elapsed total (INFO without the bar,
+    DEBUG beside it), and fits on large runs are announced first, so a long stage never
+    runs silent."""
 
     def run(fn: Callable[[FitTask], dict[str, Any]],
             tasks: Sequence[FitTask]) -> list[dict[str, Any]]:
+        done = _progress_log(tasks, progress=progress)
         if n_jobs == 1 or len(tasks) == 1:
             items = tasks
             if progress:
                 from tqdm import tqdm
 
                 items = tqdm(tasks, desc="fit", unit="model")
-            return [fn(t) for t in items]
+            return [done(fn(t)) for t in items]
         from joblib import Parallel, delayed
 
         # Slow families first, so the last task to start is a quick one.
@@ -203,13 +218,38 @@ def joblib_runner(n_jobs: int, *, progress: bool) -> Callable[..., list[dict[str
             from tqdm import tqdm
 
             gen = tqdm(gen, total=len(tasks), desc="fit", unit="model")
-        results = list(gen)
         out: list[dict[str, Any]] = [{}] * len(tasks)
-        for i, r in zip(order, results, strict=True):
-            out[i] = r
+        for i, r in zip(order, gen, strict=True):
+            out[i] = done(r)
         return out
 
     return run
+
+
+def _progress_log(tasks: Sequence[FitTask], *, progress: bool
+                  ) -> Callable[[dict[str, Any]], dict[str, Any]]:
+    """Announce fits on large runs; return the callback logging each finished fit."""
+    large = [t for t in tasks if t.runs[0].u.size >= LARGE_RUN]
+    if large:
+        big = max(large, key=lambda t: t.runs[0].u.size)
+        log.info("fit: %d of %d models identify on runs of %d samples or more (largest: %s, "
+                 "%d samples); each may take minutes", len(large), len(tasks), LARGE_RUN,
+                 big.runs[0].run_id, big.runs[0].u.size)
+    start = time.perf_counter()
+    level = logging.DEBUG if progress else logging.INFO
+    count = [0]
+
+    def done(row: dict[str, Any]) -> dict[str, Any]:
+        count[0] += 1
+        config = stages.Configuration(str(row["rig"]), stages._num(row["curve_angle_deg"]),
+                                      stages._num(row["radius_mm"]))
+        log.log(level, "fit %d/%d: %s %s %s, %d samples: %.1f s%s (elapsed %.1f s)",
+                count[0], len(tasks), row["family"], config.label, row["fit_excitation"],
+                row["n_samples"], row["fit_seconds"], " FAILED" if row.get("error") else "",
+                time.perf_counter() - start)
+        return row
+
+    return done
 
 
 _COST_HINT = {"coleman_hodgdon": 4, "bouc_wen": 3, "preisach": 2, "gamma": 1, "linear": 0}
@@ -237,7 +277,8 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
     plan = identification_plan(cfg, dataset, paths)
     tasks = stages.plan_fits(plan.dataset, family_specs(cfg), configs,
                              fit_excitations=plan.fit_excitations, fit_runs=plan.chosen,
-                             marked=plan.marked, input_col=input_col, output_col=output_col)
+                             marked=plan.marked, input_col=input_col, output_col=output_col,
+                             max_samples=int(cfg["max_samples"]))
     previous = load_models(paths.models) if cfg["cache"] else None
     progress = bool(cfg["progress"])
     n_jobs = int(cfg["n_jobs"])
@@ -278,10 +319,12 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
-    dataset = read_processed(paths.processed)
-    fits = run(plain, dataset=dataset)
     settings = tracking.settings_from_config(plain["tracking"], root=paths.root)
     tracker = tracking.Tracker(settings)
+    if tracker.enabled:
+        tracker.init_store()  # a locked or damaged store stops the stage before the fits
+    dataset = read_processed(paths.processed)
+    fits = run(plain, dataset=dataset)
     if tracker.enabled:
         with tracking.StageRun(tracker, "fit", sweep_dir=hydra_sweep_dir()) as stage_run:
             assert stage_run.parent_id is not None
@@ -307,7 +350,7 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
 @hydra.main(config_path="../conf", config_name="fit", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    run_stage("fit", lambda: main_cfg(cfg))
 
 
 if __name__ == "__main__":

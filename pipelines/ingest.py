@@ -78,7 +78,12 @@ def run_ingest(source: str | Path, out: str | Path, *,
         raise RigIOError("no raw run found in the source (run folders, .bag files, rosbag2 "
                          "folders); nothing ingested, nothing removed", file=str(given))
     clean_leftovers(dst)
-    old = read_runs(dst)
+    try:
+        old = read_runs(dst)
+    except RigIOError:
+        if not force:
+            raise
+        old = {}  # force reprocesses every run anyway: the index is written anew below
     by_key = {str(m.get("source_key")): (rid, m) for rid, m in old.items()}
     runs: dict[str, dict[str, Any]] = {}
     accepted: list[dict[str, Any]] = []

@@ -238,11 +238,13 @@ def register_champions(tracker: Any, fits: pd.DataFrame, metrics: pd.DataFrame, 
     The pyfunc goes into the child run already logged for that model (found by its
     ``model_key`` tag). A configuration whose current champion already wraps the same model
     key on the same data is left as it is (a rerun with nothing changed adds no version).
+    Processes registering at once add one version per configuration: on a local SQLite
+    store the check and the new version are made under a lock of the registered name
+    (:func:`pipelines.tracking.key_lock`); on a server an existing version of the same run,
+    model key and data is reused instead of made again.
     """
-    from mlflow.exceptions import MlflowException
-
     from pipelines.stages import _num
-    from pipelines.tracking import retry
+    from pipelines.tracking import key_lock
 
     client = tracker.client
     out: list[Registered] = []
@@ -250,48 +252,87 @@ def register_champions(tracker: Any, fits: pd.DataFrame, metrics: pd.DataFrame, 
             "records"):
         name = registered_name(str(champ["rig"]), _num(champ["curve_angle_deg"]),
                                _num(champ["radius_mm"]), prefix=prefix)
-        key = str(champ["key"])
-        try:
-            current = retry(client.get_model_version_by_alias, name, alias)
-        except MlflowException:
-            current = None
-        if current is not None and current.tags.get("model_key") == key \
-                and current.tags.get("dataset_hash") == data_hash:
-            out.append(Registered(name, str(current.version), str(champ["family"]),
-                                  str(current.run_id), False))
-            continue
-        runs = tracker.find_runs(f"tags.model_key = '{key}' and tags.kind = 'model'")
-        if not runs:
-            log.warning("registry: no run logged for model %s (%s); %s not registered",
-                        key, champ["family"], name)
-            continue
-        run_id = str(runs[0].info.run_id)
-        with tempfile.TemporaryDirectory(prefix="tsm-register-") as tmp:
-            folder = save_pyfunc(str(champ["model_json"]), Path(tmp) / ARTIFACT_PATH)
-            tracker.log_artifact(run_id, folder, ARTIFACT_PATH)
-        try:
-            retry(client.create_registered_model, name, tags={
-                "rig": str(champ["rig"]), "curve_angle_deg": _tag(champ["curve_angle_deg"]),
-                "radius_mm": _tag(champ["radius_mm"])},
-                description="Best model family of this sheath configuration (lowest "
-                            "held-out RMSE); alias 'champion' is the current one.")
-        except MlflowException as exc:
-            if "RESOURCE_ALREADY_EXISTS" not in str(exc) and "already exists" not in str(exc):
-                raise
-        tags = {"family": str(champ["family"]), "model_key": key, "dataset_hash": data_hash,
-                "fit_excitation": str(champ["fit_excitation"]),
-                "fit_run_ids": str(champ["fit_run_ids"]),
-                "score_split": str(champ["score_split"]),
-                **{k: repr(float(v)) for k, v in champ.items()
-                   if k.startswith(("heldout.", "insample.")) and v == v}}
-        artifact_uri = str(retry(client.get_run, run_id).info.artifact_uri)
-        version = retry(client.create_model_version, name,
-                        f"{artifact_uri.rstrip('/')}/{ARTIFACT_PATH}", run_id=run_id, tags=tags)
-        retry(client.set_registered_model_alias, name, alias, version.version)
-        out.append(Registered(name, str(version.version), str(champ["family"]), run_id, True))
+        # The alias check and the version it decides on are one step for every process
+        # registering into this store: two pipelines at once add one version, not two.
+        with key_lock(tracker.settings, name):
+            done = _register_one(tracker, client, champ, name, alias=alias,
+                                 data_hash=data_hash)
+        if done is not None:
+            out.append(done)
     log.info("registry: %d configurations, %d new versions", len(out),
              sum(r.new for r in out))
     return out
+
+
+def _register_one(tracker: Any, client: Any, champ: Mapping[str, Any], name: str, *,
+                  alias: str, data_hash: str) -> Registered | None:
+    """Point ``alias`` of ``name`` at a version wrapping ``champ``, creating the version only
+    when none wraps that model on that data (see :func:`register_champions`)."""
+    from mlflow.exceptions import MlflowException
+
+    from pipelines.tracking import retry
+
+    key = str(champ["key"])
+    family = str(champ["family"])
+    try:
+        current = retry(client.get_model_version_by_alias, name, alias)
+    except MlflowException:
+        current = None
+    if current is not None and _wraps(current, key, data_hash):
+        return Registered(name, str(current.version), family, str(current.run_id), False)
+    runs = tracker.find_runs(f"tags.model_key = '{key}' and tags.kind = 'model'")
+    if not runs:
+        log.warning("registry: no run logged for model %s (%s); %s not registered",
+                    key, family, name)
+        return None
+    run_id = str(runs[0].info.run_id)
+    # Create if absent: a version of this run, model and data made by another process (a
+    # server store has no file lock) is reused, not made again.
+    existing = [v for v in _versions_of_run(client, name, run_id) if _wraps(v, key, data_hash)]
+    if existing:
+        first = min(existing, key=lambda v: int(v.version))
+        retry(client.set_registered_model_alias, name, alias, first.version)
+        return Registered(name, str(first.version), family, run_id, False)
+    with tempfile.TemporaryDirectory(prefix="tsm-register-") as tmp:
+        folder = save_pyfunc(str(champ["model_json"]), Path(tmp) / ARTIFACT_PATH)
+        tracker.log_artifact(run_id, folder, ARTIFACT_PATH)
+    try:
+        retry(client.create_registered_model, name, tags={
+            "rig": str(champ["rig"]), "curve_angle_deg": _tag(champ["curve_angle_deg"]),
+            "radius_mm": _tag(champ["radius_mm"])},
+            description="Best model family of this sheath configuration (lowest "
+                        "held-out RMSE); alias 'champion' is the current one.")
+    except MlflowException as exc:
+        if "RESOURCE_ALREADY_EXISTS" not in str(exc) and "already exists" not in str(exc):
+            raise
+    tags = {"family": family, "model_key": key, "dataset_hash": data_hash,
+            "fit_excitation": str(champ["fit_excitation"]),
+            "fit_run_ids": str(champ["fit_run_ids"]),
+            "score_split": str(champ["score_split"]),
+            **{k: repr(float(v)) for k, v in champ.items()
+               if k.startswith(("heldout.", "insample.")) and v == v}}
+    artifact_uri = str(retry(client.get_run, run_id).info.artifact_uri)
+    version = retry(client.create_model_version, name,
+                    f"{artifact_uri.rstrip('/')}/{ARTIFACT_PATH}", run_id=run_id, tags=tags)
+    retry(client.set_registered_model_alias, name, alias, version.version)
+    return Registered(name, str(version.version), family, run_id, True)
+
+
+def _wraps(version: Any, key: str, data_hash: str) -> bool:
+    tags = version.tags or {}
+    return tags.get("model_key") == key and tags.get("dataset_hash") == data_hash
+
+
+def _versions_of_run(client: Any, name: str, run_id: str) -> list[Any]:
+    from mlflow.exceptions import MlflowException
+
+    from pipelines.tracking import retry
+
+    try:
+        return list(retry(client.search_model_versions,
+                          f"name = '{name}' and run_id = '{run_id}'"))
+    except MlflowException:  # no such registered model yet
+        return []
 
 
 def _tag(value: Any) -> str:

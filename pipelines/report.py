@@ -34,6 +34,7 @@ from pipelines.common import (
     dataset_units,
     hydra_output_dir,
     hydra_sweep_dir,
+    run_stage,
     to_container,
 )
 from pipelines.fit import load_models
@@ -261,6 +262,8 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
     fits = fits[fits.apply(lambda r: _config_of(r).label in labels, axis=1)
                 if not fits.empty else []]
     fits = fits[fits["fit_excitation"] == fit_exc].reset_index(drop=True)
+    # Only predictions whose bytes match their recorded hash are drawn (and keyed): a damaged
+    # file is left out of the figures instead of passing for the one validate wrote.
     pred_keys = {c.label: (read_prediction_meta(prediction_path(paths.predictions, c)) or {})
                  .get("key") for c in configs}
     settings = {k: v for k, v in cfg.items() if k not in ("paths", "tracking", "n_jobs",
@@ -314,6 +317,8 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
     jobs = []
     if plot_cfg["per_configuration"]:
         for c in configs:
+            if pred_keys[c.label] is None:
+                continue
             out = contained(plots_dir, f"config_{c.label}.png")
             title = (f"{c.rig}  phi={c.curve_angle_deg:g} deg  r={c.radius_mm:g} mm"
                      if c.curve_angle_deg is not None and c.radius_mm is not None else c.label)
@@ -385,7 +390,7 @@ def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fi
     rows = fits[(fits["family"] == "gamma") & fits["model_json"].notna()
                 & (fits.apply(lambda r: _config_of(r).label == config.label, axis=1))]
     pred_path = prediction_path(paths.predictions, config)
-    if rows.empty or not pred_path.exists():
+    if rows.empty or not cache.digest_matches(pred_path):
         return None
     model = stages.load_model(str(rows.iloc[0]["model_json"]))
     preds = pd.read_parquet(pred_path)
@@ -587,7 +592,7 @@ def log_report(tracker: Any, run_id: str, result: ReportResult) -> None:
 
 @hydra.main(config_path="../conf", config_name="report", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    run_stage("report", lambda: main_cfg(cfg))
 
 
 if __name__ == "__main__":

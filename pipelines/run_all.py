@@ -41,6 +41,7 @@ from pipelines.common import (
     hydra_output_dir,
     identification_plan,
     read_processed,
+    run_stage,
     to_container,
 )
 from pipelines.stages import PipelineError
@@ -406,7 +407,7 @@ def _track_finish(tracker: Any, state: TrackState, result: PipelineResult) -> No
 
 @hydra.main(config_path="../conf", config_name="pipeline", version_base="1.3")
 def main(cfg: Any) -> None:
-    run_pipeline(to_container(cfg))
+    run_stage("pipeline", lambda: run_pipeline(to_container(cfg)))
 
 
 if __name__ == "__main__":

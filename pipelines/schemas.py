@@ -157,6 +157,11 @@ class FitConfig(IdentificationConfig):
     #: In the all-families mode: per-family hyper-parameter overrides, added with ``+``:
     #: ``+family_overrides.gamma.n_operators=21``.
     family_overrides: dict[str, Any] = field(default_factory=dict)
+    #: Per-run limit of the fit: the most samples one identification run may have; a longer
+    #: one stops the stage before any fit, naming the run, its size and this setting. The
+    #: standard campaign's records have ~8 000 samples; the limit keeps a 10 kHz record of
+    #: 10 million samples (a fit of it passed 5 GB) from exhausting the machine's memory.
+    max_samples: int = 2_000_000
 
 
 @dataclass

@@ -423,17 +423,26 @@ def plan_fits(
     marked: frozenset[str] = frozenset(),
     input_col: str = "input",
     output_col: str = "output",
+    max_samples: int | None = None,
 ) -> list[FitTask]:
     """One task per family x configuration x identification excitation present in the data.
 
     Which runs identify (see :func:`identification_runs`): the one run of the excitation in
     the configuration, or every run named in ``fit_runs`` or marked by its manifest (fitted
     jointly); never a silent pick among several.
+
+    An identification run longer than ``max_samples`` stops the stage before anything is
+    fitted, naming the run, its size and the setting. It is not decimated here: the linear
+    model's delay counts samples and Coleman-Hodgdon's Euler scheme steps once per sample,
+    while validate scores every model on the recorded runs at their own rate.
     """
     check_dataset(dataset, signals=(input_col, output_col))
     if not families:
         raise PipelineError("no model family selected")
+    if max_samples is not None and max_samples < 2:
+        raise PipelineError(f"max_samples must be at least 2, got {max_samples}")
     chosen = set(map(str, fit_runs))
+    too_long: list[str] = []
     tasks: list[FitTask] = []
     for config in configs:
         by_kind = run_signals(config_rows(dataset, config), input_col=input_col,
@@ -459,6 +468,12 @@ def plan_fits(
                      if len(chosen_runs) > 1 else "")
             data = (chosen_runs[0].data_hash if len(chosen_runs) == 1
                     else [r.data_hash for r in chosen_runs])
+            long_runs = [r for r in chosen_runs
+                         if max_samples is not None and r.u.size > max_samples]
+            if long_runs:
+                too_long += [f"{config.label}: run {r.run_id} has {r.u.size} samples"
+                             for r in long_runs]
+                continue
             for fam in families:
                 key = cache.combine({
                     "stage": "fit", "family": fam.name, "config": dict(fam.config),
@@ -466,6 +481,14 @@ def plan_fits(
                     "signals": [input_col, output_col],
                 })
                 tasks.append(FitTask(fam, config, kind, chosen_runs, key))
+    if too_long:
+        shown = "; ".join(too_long[:5]) + (f"; and {len(too_long) - 5} more"
+                                           if len(too_long) > 5 else "")
+        raise PipelineError(
+            f"identification run(s) beyond the per-run limit of the fit, max_samples="
+            f"{max_samples}: {shown}. Nothing was fitted. Raise max_samples (memory and time "
+            "grow with it), or identify on a shorter or resampled record (fit_runs=[...], or "
+            "a lower rate at the rig or in the importer)")
     if not tasks:
         raise PipelineError(
             f"nothing to fit: no run of excitation(s) {list(fit_excitations)} in the "

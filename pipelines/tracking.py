@@ -23,6 +23,7 @@ import logging
 import os
 import random
 import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
@@ -123,6 +124,36 @@ def retry(fn: Callable[..., T], *args: Any, attempts: int = 8, **kwargs: Any) ->
             time.sleep(delay * (1 + random.random()))
             delay = min(delay * 2, 2.0)
     raise AssertionError("unreachable")  # pragma: no cover
+
+
+def store_error(settings: TrackingSettings, exc: BaseException) -> Exception:
+    """A store that cannot be opened, as one line naming it and what to do (a
+    :class:`~pipelines.stages.PipelineError`; the stage entry points print it alone)."""
+    from pipelines.stages import PipelineError
+
+    uri = settings.tracking_uri
+    text = f"{type(exc).__name__}: {exc}"
+    low = text.lower()
+    first = next((line.strip() for line in str(exc).splitlines() if line.strip()),
+                 type(exc).__name__)[:160]
+    if not uri.startswith("sqlite:///"):
+        return PipelineError(
+            f"MLflow store {uri} cannot be opened ({first}): check tracking.uri "
+            "(MLFLOW_TRACKING_URI), the credentials and that the server is up, or run with "
+            "tracking=off")
+    db = uri[len("sqlite:///"):]
+    if "database is locked" in low or "database table is locked" in low:
+        return PipelineError(
+            f"MLflow store {db} is locked by another process (still locked after retrying): "
+            f"let the other stage or sweep finish, or find it with `fuser {db}` and stop it, "
+            "then run again")
+    if any(s in low for s in ("malformed", "not a database", "file is encrypted")):
+        return PipelineError(
+            f"MLflow store {db} is damaged ({first}): move it aside (`mv {db} {db}.damaged`) "
+            "and run again to start a new, empty store (restore a backup to keep its runs), "
+            "or run with tracking=off")
+    return PipelineError(f"MLflow store {db} cannot be opened ({first}); move it aside or "
+                         "run with tracking=off")
 
 
 # --------------------------------------------------------------------------------------
@@ -244,7 +275,10 @@ class Tracker:
         a process that died are then ended as FAILED (:func:`end_dead_runs`).
         """
         with store_lock(self.settings):
-            exp_id = self._init_store_locked()
+            try:
+                exp_id = self._init_store_locked()
+            except Exception as exc:
+                raise store_error(self.settings, exc) from exc
         with contextlib.suppress(Exception):  # housekeeping must never stop a stage
             end_dead_runs(self)
         clean_staging_leftovers()
@@ -367,6 +401,32 @@ def store_lock(settings: TrackingSettings) -> Iterator[None]:
     db = Path(uri[len("sqlite:///"):])
     db.parent.mkdir(parents=True, exist_ok=True)
     with open(db.with_name(db.name + ".lock"), "a+b") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+@contextlib.contextmanager
+def key_lock(settings: TrackingSettings, key: str) -> Iterator[None]:
+    """Exclusive lock for one key (a registered model's name) among the processes using a
+    local SQLite store: ``flock`` on ``mlflow.db.locks/<hash of key>.lock`` beside the store,
+    so a check and the write it decides (the champion alias, a new version) are one step for
+    every process. Other keys are not held up. Nothing for a server store, whose callers
+    create if absent instead."""
+    uri = settings.tracking_uri
+    if not uri.startswith("sqlite:///"):
+        yield
+        return
+    import fcntl
+    import hashlib
+
+    db = Path(uri[len("sqlite:///"):])
+    folder = db.with_name(db.name + ".locks")
+    folder.mkdir(parents=True, exist_ok=True)
+    name = hashlib.sha256(key.encode("utf-8")).hexdigest()[:24]  # no data in a file name
+    with open(folder / f"{name}.lock", "a+b") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
         try:
             yield
@@ -591,6 +651,8 @@ def _eq(column: pd.Series, value: float | None) -> pd.Series:
 
 from hydra.experimental.callback import Callback as _HydraCallback  # noqa: E402
 
+from pipelines.stages import PipelineError  # noqa: E402
+
 
 class MlflowSweepCallback(_HydraCallback):
     """Hydra callback: before a multirun's jobs start, initialise the store and open the
@@ -615,7 +677,11 @@ class MlflowSweepCallback(_HydraCallback):
         if not settings.enabled:
             return
         self._tracker = Tracker(settings)
-        self._tracker.init_store()
+        try:
+            self._tracker.init_store()
+        except PipelineError as err:  # before any job: one line, not a traceback
+            print(f"{config.hydra.job.name}: {err}", file=sys.stderr)
+            raise SystemExit(2) from None
         task = config.hydra.job.name
         overrides = list(config.hydra.overrides.task)
         self._parent = self._tracker.start_run(

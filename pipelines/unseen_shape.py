@@ -42,6 +42,7 @@ from pipelines.common import (
     hydra_output_dir,
     hydra_sweep_dir,
     read_processed,
+    run_stage,
     to_container,
 )
 from pipelines.stages import Configuration, PipelineError, RunSignal
@@ -401,7 +402,7 @@ def main_cfg(cfg: Any) -> UnseenShapeResult:
 
 @hydra.main(config_path="../conf", config_name="unseen_shape", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    run_stage("unseen_shape", lambda: main_cfg(cfg))
 
 
 if __name__ == "__main__":

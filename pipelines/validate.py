@@ -24,7 +24,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipelines import schemas, stages
+from pipelines import cache, schemas, stages
 from pipelines.common import (
     Paths,
     dataset_hash,
@@ -32,6 +32,7 @@ from pipelines.common import (
     hydra_sweep_dir,
     identification_plan,
     read_processed,
+    run_stage,
     to_container,
 )
 from pipelines.fit import load_models
@@ -47,7 +48,16 @@ def prediction_path(predictions_dir: Path, config: Configuration) -> Path:
 
 
 def read_prediction_meta(path: Path) -> dict[str, Any] | None:
-    """The cache record stored in a predictions file's parquet metadata (None if absent)."""
+    """The cache record stored in a predictions file's parquet metadata; None when absent
+    or when the file's bytes no longer have the SHA-256 recorded beside it (damaged pages
+    under an intact footer would otherwise pass for up to date)."""
+    if not path.exists():
+        return None
+    if not cache.digest_matches(path):
+        log.warning("predictions file %s does not match its recorded SHA-256 (damaged, edited "
+                    "or written before hashes were recorded): not reused; validate rewrites it",
+                    path)
+        return None
     try:
         meta = pq.read_schema(path).metadata or {}
     except (OSError, pa.ArrowException):
@@ -64,6 +74,8 @@ def write_predictions(path: Path, preds: pd.DataFrame, record: Mapping[str, Any]
     table = table.replace_schema_metadata(meta)
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp, compression="zstd")
+        digest = cache.sha256_file(tmp)
+    cache.write_digest(path, digest)
 
 
 def validate_configuration(
@@ -250,9 +262,11 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
-    metrics, errors = run(plain)
     tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
                                                              root=paths.root))
+    if tracker.enabled:
+        tracker.init_store()  # a locked or damaged store stops the stage before the work
+    metrics, errors = run(plain)
     if tracker.enabled:
         with tracking.StageRun(tracker, "validate", sweep_dir=hydra_sweep_dir()) as stage_run:
             assert stage_run.parent_id is not None
@@ -274,7 +288,7 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
 @hydra.main(config_path="../conf", config_name="validate", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    run_stage("validate", lambda: main_cfg(cfg))
 
 
 if __name__ == "__main__":

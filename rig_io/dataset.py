@@ -117,10 +117,16 @@ def read_runs(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
         return {}
     try:
         data = json.loads(file.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as err:
-        raise RigIOError(f"unreadable run index: {err}", file=str(file)) from None
-    runs = data.get("runs", {})
-    return dict(runs) if isinstance(runs, dict) else {}
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise RigIOError(f"unreadable run index ({err}): run ingest with force=true to "
+                         f"rebuild it from the sources, or delete {RUNS} and run ingest "
+                         "again", file=str(file)) from None
+    runs = data.get("runs", {}) if isinstance(data, dict) else None
+    if not isinstance(runs, dict):
+        raise RigIOError(f"run index without a 'runs' table: run ingest with force=true to "
+                         f"rebuild it from the sources, or delete {RUNS} and run ingest again",
+                         file=str(file))
+    return dict(runs)
 
 
 def write_runs(out: str | os.PathLike[str], runs: dict[str, dict[str, Any]]) -> Path:

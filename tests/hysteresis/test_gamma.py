@@ -329,3 +329,35 @@ def test_fits_on_the_same_record_do_not_share_their_thresholds() -> None:
     first.thresholds_ *= 2.0  # a caller's edit of one model's thresholds stays in that model
     assert np.array_equal(second.thresholds_, grid)
     assert np.array_equal(GammaModel(n_operators=5).fit(u, y).thresholds_, grid)
+
+
+def test_nonneg_weights_are_clipped_to_the_bound_whatever_the_kernel_rounds(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """An active bound that BVLS returns a rounding error below 0 (-3.5e-18, as OpenBLAS's
+    SkylakeX kernel gave on one machine) comes out exactly 0; the free offset keeps its sign."""
+    from scipy.optimize import OptimizeResult
+
+    import hysteresis.gamma as gamma_mod
+
+    rounded = np.array([-3.5e-18, 0.4, 0.6, -0.2])  # 3 weights, then a free offset
+
+    def bvls(a: object, y: object, **kwargs: object) -> OptimizeResult:
+        return OptimizeResult(x=rounded.copy())
+
+    monkeypatch.setattr(gamma_mod, "lsq_linear", bvls)
+    a = np.random.default_rng(1).normal(size=(10, 4))
+    x, _ = gamma_mod.solve_play_weights(a, a @ rounded, n_weights=3, constraint="nonneg")
+    assert x[0] == 0.0 and np.all(x[:3] >= 0.0)
+    np.testing.assert_allclose(x[1:], rounded[1:], rtol=0, atol=0)
+
+
+def test_nonneg_and_sum_to_one_fits_satisfy_their_constraints() -> None:
+    """Real fits on a record whose best unconstrained weights go negative: Q >= 0 holds
+    exactly (no tolerance: a constraint is not a measurement), sum(Q) = 1 to rounding."""
+    q = np.array(TABLE[3]["weights"], dtype=float)
+    q[[1, 4]] = -0.05  # a free fit would put weights below zero
+    y = simulate(q) + np.random.default_rng(2).normal(0.0, NOISE_SD, U.size)
+    nonneg = GammaModel(max_threshold=2.0, constraint="nonneg", n_operators=11).fit(U, y)
+    assert np.all(nonneg.weights_ >= 0.0) and np.any(nonneg.weights_ == 0.0)
+    summed = GammaModel(**THESIS).fit(U, y)
+    assert abs(float(summed.weights_.sum()) - 1.0) <= 1e-12

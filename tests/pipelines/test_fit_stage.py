@@ -124,7 +124,12 @@ def test_parallel_fits_equal_serial_fits(tmp_path: Path) -> None:
     serial = stages.fit_models(tasks)
     parallel = stages.fit_models(tasks, runner=fit_stage.joblib_runner(2, progress=False))
     assert list(parallel["key"]) == list(serial["key"])
-    assert list(parallel["model_json"]) == list(serial["model_json"])
+    # the same models, to rounding: worker processes may run their BLAS with another thread
+    # count than this one, which can move last bits
+    u = data.loc[data["excitation"] == "triangle_decay", "input"].to_numpy()[:300]
+    for a, b in zip(parallel["model_json"], serial["model_json"], strict=True):
+        pa, pb = stages.load_model(str(a)).predict(u), stages.load_model(str(b)).predict(u)
+        np.testing.assert_allclose(pa, pb, rtol=1e-9, atol=1e-12 * float(np.ptp(pb)))
 
 
 def test_reads_the_processed_dataset_from_disk(tmp_path: Path) -> None:

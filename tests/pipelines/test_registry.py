@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -75,6 +76,68 @@ def test_registering_again_with_nothing_changed_adds_no_version(
     moved = registry.register_champions(tracker, fits, metrics, data_hash="h2")
     assert [r.version for r in moved] == ["2", "2"]  # new data: a new champion version
     assert registry.champion_table(tracker)["dataset_hash"].tolist() == ["h2", "h2"]
+
+
+def test_a_version_of_the_same_run_model_and_data_is_reused_not_made_again(
+        registered: dict[str, object]) -> None:
+    """Create if absent (what a server store relies on): with the alias gone, registering
+    the same champions again points the alias back at the existing versions."""
+    tracker = registered["tracker"]
+    fits, metrics = registered["fits"], registered["metrics"]
+    assert isinstance(fits, pd.DataFrame) and isinstance(metrics, pd.DataFrame)
+    client = tracker.client  # type: ignore[attr-defined]
+    before = registry.champion_table(tracker).set_index("name")["version"].astype(str)
+    name = "tsm.tsm-bench_phi090_r030"
+    client.delete_registered_model_alias(name, registry.ALIAS)
+    n_versions = len(client.search_model_versions("name LIKE 'tsm.%'"))
+    data_hash = registry.champion_table(tracker, [n for n in before.index if n != name])[
+        "dataset_hash"].iloc[0]
+    again = registry.register_champions(tracker, fits, metrics, data_hash=str(data_hash))
+    assert [r.new for r in again] == [False, False]
+    assert len(client.search_model_versions("name LIKE 'tsm.%'")) == n_versions
+    after = registry.champion_table(tracker).set_index("name")["version"].astype(str)
+    assert after.to_dict() == before.to_dict()
+
+
+def _register_at_once(root: str, tables: str, barrier: Any) -> None:
+    """One of two processes registering the same champions into one store at once."""
+    fits, metrics = pd.read_pickle(f"{tables}/fits.pkl"), pd.read_pickle(f"{tables}/metrics.pkl")
+    tracker = tracking.Tracker(tracking.settings_from_config({}, root=root))
+    tracker.client  # noqa: B018 - the store is opened before the race starts
+    barrier.wait(timeout=120)
+    registry.register_champions(tracker, fits, metrics, data_hash="h-race")
+
+
+def test_two_processes_registering_at_once_add_one_version_per_configuration(
+        registered: dict[str, object], tmp_path: Path) -> None:
+    import multiprocessing
+
+    fits, metrics = registered["fits"], registered["metrics"]
+    assert isinstance(fits, pd.DataFrame) and isinstance(metrics, pd.DataFrame)
+    root = tmp_path / "store"
+    mlflow_store(root)
+    tracker = tracking.Tracker(tracking.settings_from_config({}, root=root))
+    parent = tracker.start_run("pipeline", tags={"kind": "parent"})
+    tracking.log_model_runs(tracker, parent, fits=fits, metrics=metrics, base_params={},
+                            tags={"dataset_hash": "h-race"})
+    tracker.end_run(parent)
+    fits.to_pickle(tmp_path / "fits.pkl")
+    metrics.to_pickle(tmp_path / "metrics.pkl")
+    ctx = multiprocessing.get_context("spawn")  # no store connection inherited by a fork
+    barrier = ctx.Barrier(2)
+    procs = [ctx.Process(target=_register_at_once, args=(str(root), str(tmp_path), barrier))
+             for _ in range(2)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(timeout=180)
+    assert [p.exitcode for p in procs] == [0, 0]
+    versions = tracker.client.search_model_versions("name LIKE 'tsm.%'")
+    assert len(versions) == 2, sorted((v.name, v.version, v.run_id) for v in versions)
+    assert len({v.run_id for v in versions}) == len(versions)
+    assert {v.name for v in versions} == {"tsm.tsm-bench_phi015_r030",
+                                          "tsm.tsm-bench_phi090_r030"}
+    assert sorted(map(str, registry.champion_table(tracker)["version"])) == ["1", "1"]
 
 
 def test_pyfunc_in_a_fresh_process_equals_the_familys_predict(
