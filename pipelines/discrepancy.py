@@ -16,6 +16,8 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -38,12 +40,14 @@ from hysteresis.discrepancy.workflow import (
 from pipelines import schemas
 from rig_io.atomic import (
     atomic_path,
+    check_output,
     clean_leftovers,
     clean_owned_temp,
     contained,
     owned_prefix,
     write_text_atomic,
 )
+from rig_io.errors import RigIOError
 
 log = logging.getLogger(__name__)
 #: Work folders in the temp dir: ``tsm-discrepancy-<host>-<pid>-*`` (leaks of killed runs
@@ -280,7 +284,7 @@ def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
         _fixed_margins(fig, len(runs))
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in g.key)
         path = contained(out_dir, f"discrepancy_{safe}.png")
-        with atomic_path(path, suffix=".png") as tmp:
+        with atomic_path(path, suffix=".png", folder=False) as tmp:
             fig.savefig(tmp, dpi=90, format="png")
         plt.close(fig)
         files.append(path)
@@ -465,9 +469,17 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         raise DiscrepancyError("source=<dir of raw runs or bags> is required")
     if not cfg.get("report"):
         raise DiscrepancyError("report=<file.json> is required")
-    report_path = Path(str(cfg["report"])).resolve()
+    # never resolved: a link given as the report is refused, not followed to what it names
+    report_path = Path(os.path.abspath(os.path.expanduser(str(cfg["report"]))))
+    plots_dir = report_path.parent / f"{report_path.stem}_plots"
+    try:  # before any work: a wrong kind of output path fails now, not after the analysis
+        check_output(report_path, folder=False)
+        if cfg["plots"]:
+            check_output(plots_dir, folder=True)
+    except RigIOError as err:
+        raise DiscrepancyError(f"report={cfg['report']}: {err}") from None
     clean_leftovers(report_path.parent, recursive=False)  # temporaries of a killed run
-    clean_leftovers(report_path.parent / f"{report_path.stem}_plots")
+    clean_leftovers(plots_dir)
     progress = bool(cfg["progress"])
     settings = workflow_settings(cfg["workflow"], progress=progress)
     clean_owned_temp(TEMP_TAG)  # work folders of killed runs
@@ -496,8 +508,7 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     report["run_choice"] = run_choice or None
     report["source"] = str(Path(str(cfg["source"])).resolve())
     report["ingest"] = {"accepted": ingest_rep["n_accepted"], "rejected": ingest_rep["rejected"]}
-    plots = plot_report(full, report_path.parent / f"{report_path.stem}_plots") \
-        if cfg["plots"] else []
+    plots = plot_report(full, plots_dir) if cfg["plots"] else []
     report["plots"] = [str(p) for p in plots]
     report["elapsed_s"] = round(time.perf_counter() - t0, 3)
     write_text_atomic(report_path, json.dumps(report, indent=1, default=_json_default) + "\n")
@@ -636,7 +647,11 @@ def _main() -> None:
 
     @hydra.main(config_path="../conf", config_name="discrepancy", version_base="1.3")
     def main(cfg: DictConfig) -> None:
-        rep = run(to_container(cfg))
+        try:
+            rep = run(to_container(cfg))
+        except (DiscrepancyError, RigIOError) as err:
+            print(f"discrepancy: {err}", file=sys.stderr)
+            raise SystemExit(2) from None
         print(rep["headline"])
 
     main()
