@@ -32,6 +32,7 @@ from pipelines.common import (
     identification_plan,
     read_processed,
     to_container,
+    write_failure_exits,
 )
 from pipelines.stages import FamilySpec, FitTask, PipelineError
 from rig_io.atomic import clean_leftovers, contained, write_text_atomic
@@ -307,7 +308,8 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
 @hydra.main(config_path="../conf", config_name="fit", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    with write_failure_exits("fit"):
+        main_cfg(cfg)
 
 
 if __name__ == "__main__":

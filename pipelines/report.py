@@ -33,6 +33,7 @@ from pipelines.common import (
     hydra_output_dir,
     hydra_sweep_dir,
     to_container,
+    write_failure_exits,
 )
 from pipelines.fit import load_models
 from pipelines.stages import Configuration, PipelineError
@@ -512,7 +513,8 @@ def log_report(tracker: Any, run_id: str, result: ReportResult) -> None:
 
 @hydra.main(config_path="../conf", config_name="report", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    with write_failure_exits("report"):
+        main_cfg(cfg)
 
 
 if __name__ == "__main__":

@@ -43,6 +43,7 @@ from pipelines.common import (
     hydra_sweep_dir,
     read_processed,
     to_container,
+    write_failure_exits,
 )
 from pipelines.stages import Configuration, PipelineError, RunSignal
 from rig_io.atomic import atomic_path, write_text_atomic
@@ -385,7 +386,8 @@ def main_cfg(cfg: Any) -> UnseenShapeResult:
 
 @hydra.main(config_path="../conf", config_name="unseen_shape", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    with write_failure_exits("unseen_shape"):
+        main_cfg(cfg)
 
 
 if __name__ == "__main__":

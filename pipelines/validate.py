@@ -33,6 +33,7 @@ from pipelines.common import (
     identification_plan,
     read_processed,
     to_container,
+    write_failure_exits,
 )
 from pipelines.fit import load_models
 from pipelines.stages import Configuration, RunSignal
@@ -242,7 +243,8 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
 
 @hydra.main(config_path="../conf", config_name="validate", version_base="1.3")
 def main(cfg: Any) -> None:
-    main_cfg(cfg)
+    with write_failure_exits("validate"):
+        main_cfg(cfg)
 
 
 if __name__ == "__main__":
