@@ -30,7 +30,12 @@ import numpy.typing as npt
 import pandas as pd
 
 from hysteresis.base import HysteresisError
-from hysteresis.discrepancy.runs import RunData, split_single_runs
+from hysteresis.discrepancy.runs import (
+    RunData,
+    check_one_rig,
+    describe_mix,
+    split_single_runs,
+)
 from hysteresis.discrepancy.workflow import (
     WorkflowSettings,
     base_factory_for,
@@ -106,6 +111,35 @@ def _finite(col: pd.Series) -> np.ndarray | None:
     return arr if np.isfinite(arr).all() else None
 
 
+def output_kind(meta: Mapping[str, Any]) -> tuple[str, str, str]:
+    """(rig, output unit, output quantity) of one ingested run's metadata: the quantity is
+    the camera's or tracker's ``quantity`` (``tip_angle_deg``, ``output_mm``) when that is
+    the output, else ``output_<unit>`` for the output encoder."""
+    manifest = meta.get("manifest") or {}
+    rig = str(meta.get("rig") or manifest.get("rig") or "")
+    unit = str((meta.get("units") or {}).get("output") or "")
+    source = str(meta.get("output_source") or "encoder")
+    channel = (manifest.get("channels") or {}).get(source) or {}
+    quantity = str(channel.get("quantity") or f"output_{unit}") if source != "encoder" \
+        else f"output_{unit}"
+    return rig, unit, quantity
+
+
+def check_one_kind(meta: Mapping[str, Mapping[str, Any]]) -> None:
+    """A source whose runs come from several rigs, or measure the output in several units or
+    as several quantities (mm of tendon and degrees of tip angle), is refused before the
+    analysis: one RMSE over mm and deg means nothing, and an effect of one group is lost in
+    the other's. The message names each group and its runs."""
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for run_id in sorted(meta):
+        rig, unit, quantity = output_kind(meta[run_id])
+        shown = "" if quantity == f"output_{unit}" else quantity
+        groups.setdefault((rig, unit, shown), []).append(str(run_id))
+    mix = describe_mix(groups, ("rigs", "output units", "output quantities"))
+    if mix is not None:
+        raise DiscrepancyError(mix)
+
+
 def runs_from_dataset(rows: pd.DataFrame, meta: Mapping[str, Mapping[str, Any]], *,
                       identify_excitations: list[str], input_col: str = "input",
                       output_col: str = "output",
@@ -114,6 +148,7 @@ def runs_from_dataset(rows: pd.DataFrame, meta: Mapping[str, Mapping[str, Any]],
     for c in (input_col, output_col):
         if c not in rows:
             raise DiscrepancyError(f"dataset has no column {c!r}")
+    check_one_kind(meta)
     out = []
     identify = set(identify_excitations)
     for run_id, df in rows.groupby("run_id", sort=True):
@@ -335,6 +370,10 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
     loop's shape stand in for the base's misfit, and the answer would depend on the base and
     not on the source."""
     st = settings or WorkflowSettings()
+    try:
+        check_one_rig(runs)
+    except HysteresisError as err:
+        raise DiscrepancyError(str(err)) from None
     model_error = None
     if ukf_evidence:
         try:
