@@ -98,6 +98,7 @@ def start_postgres(services: Services) -> None:
     sock.mkdir(parents=True)
     password = secrets.token_hex(12)
     pwfile = root / "pw"
+    pwfile.touch(mode=0o600)  # readable by its owner only, before the secret goes in
     pwfile.write_text(password + "\n")
     if os.geteuid() == 0:
         for p in (root, sock, pwfile):
@@ -144,12 +145,11 @@ def start_mlflow_server(services: Services, *, workers: int = 2) -> None:
     port = localserv.free_port()
     artifacts = services.workdir / "artifacts"
     artifacts.mkdir()
-    cmd = [sys.executable, "-m", "mlflow", "server",
-           "--backend-store-uri", services.postgres_uri,
-           "--artifacts-destination", artifacts.resolve().as_uri(),
-           "--host", localserv.LOOPBACK, "--port", str(port), "--workers", str(workers)]
+    cmd, env = localserv.mlflow_server_launch(
+        sys.executable, services.postgres_uri, artifacts_uri=artifacts.resolve().as_uri(),
+        port=port, workers=workers)
     log_file = services.workdir / "logs" / "mlflow.log"
-    proc = localserv.start(cmd, log=log_file, cwd=services.workdir)
+    proc = localserv.start(cmd, log=log_file, cwd=services.workdir, env=env)
     services.procs.append(("mlflow", proc))
     url = f"http://{localserv.LOOPBACK}:{port}"
     localserv.wait_http(f"{url}/health", timeout=180, proc=proc, log=log_file)

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
@@ -13,6 +14,7 @@ import pandas as pd
 
 from pipelines import cache
 from pipelines.stages import PipelineError
+from rig_io.errors import WriteError
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 CONF_DIR = REPO_ROOT / "conf"
@@ -32,6 +34,17 @@ def sweep_id() -> str:
         value = f"{os.getpid()}-{secrets.token_hex(3)}"
         os.environ[SWEEP_ID_ENV] = value
     return value
+
+
+@contextlib.contextmanager
+def write_failure_exits(stage: str) -> Iterator[None]:
+    """In a stage's entry point: an output that cannot be written (a full disk, no
+    permission) ends the stage with one line on stderr and exit status 1, not a traceback."""
+    try:
+        yield
+    except WriteError as err:
+        print(f"{stage}: {err}", file=sys.stderr)
+        raise SystemExit(1) from None
 
 
 def _register_resolvers() -> None:

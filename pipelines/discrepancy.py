@@ -16,6 +16,8 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -28,7 +30,12 @@ import numpy.typing as npt
 import pandas as pd
 
 from hysteresis.base import HysteresisError
-from hysteresis.discrepancy.runs import RunData, split_single_runs
+from hysteresis.discrepancy.runs import (
+    RunData,
+    check_one_rig,
+    describe_mix,
+    split_single_runs,
+)
 from hysteresis.discrepancy.workflow import (
     WorkflowSettings,
     base_factory_for,
@@ -38,12 +45,14 @@ from hysteresis.discrepancy.workflow import (
 from pipelines import schemas
 from rig_io.atomic import (
     atomic_path,
+    check_output,
     clean_leftovers,
     clean_owned_temp,
     contained,
     owned_prefix,
     write_text_atomic,
 )
+from rig_io.errors import RigIOError
 
 log = logging.getLogger(__name__)
 #: Work folders in the temp dir: ``tsm-discrepancy-<host>-<pid>-*`` (leaks of killed runs
@@ -102,6 +111,35 @@ def _finite(col: pd.Series) -> np.ndarray | None:
     return arr if np.isfinite(arr).all() else None
 
 
+def output_kind(meta: Mapping[str, Any]) -> tuple[str, str, str]:
+    """(rig, output unit, output quantity) of one ingested run's metadata: the quantity is
+    the camera's or tracker's ``quantity`` (``tip_angle_deg``, ``output_mm``) when that is
+    the output, else ``output_<unit>`` for the output encoder."""
+    manifest = meta.get("manifest") or {}
+    rig = str(meta.get("rig") or manifest.get("rig") or "")
+    unit = str((meta.get("units") or {}).get("output") or "")
+    source = str(meta.get("output_source") or "encoder")
+    channel = (manifest.get("channels") or {}).get(source) or {}
+    quantity = str(channel.get("quantity") or f"output_{unit}") if source != "encoder" \
+        else f"output_{unit}"
+    return rig, unit, quantity
+
+
+def check_one_kind(meta: Mapping[str, Mapping[str, Any]]) -> None:
+    """A source whose runs come from several rigs, or measure the output in several units or
+    as several quantities (mm of tendon and degrees of tip angle), is refused before the
+    analysis: one RMSE over mm and deg means nothing, and an effect of one group is lost in
+    the other's. The message names each group and its runs."""
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for run_id in sorted(meta):
+        rig, unit, quantity = output_kind(meta[run_id])
+        shown = "" if quantity == f"output_{unit}" else quantity
+        groups.setdefault((rig, unit, shown), []).append(str(run_id))
+    mix = describe_mix(groups, ("rigs", "output units", "output quantities"))
+    if mix is not None:
+        raise DiscrepancyError(mix)
+
+
 def runs_from_dataset(rows: pd.DataFrame, meta: Mapping[str, Mapping[str, Any]], *,
                       identify_excitations: list[str], input_col: str = "input",
                       output_col: str = "output",
@@ -110,6 +148,7 @@ def runs_from_dataset(rows: pd.DataFrame, meta: Mapping[str, Mapping[str, Any]],
     for c in (input_col, output_col):
         if c not in rows:
             raise DiscrepancyError(f"dataset has no column {c!r}")
+    check_one_kind(meta)
     out = []
     identify = set(identify_excitations)
     for run_id, df in rows.groupby("run_id", sort=True):
@@ -280,7 +319,7 @@ def plot_report(report: Mapping[str, Any], out_dir: Path) -> list[Path]:
         _fixed_margins(fig, len(runs))
         safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in g.key)
         path = contained(out_dir, f"discrepancy_{safe}.png")
-        with atomic_path(path, suffix=".png") as tmp:
+        with atomic_path(path, suffix=".png", folder=False) as tmp:
             fig.savefig(tmp, dpi=90, format="png")
         plt.close(fig)
         files.append(path)
@@ -331,6 +370,10 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
     loop's shape stand in for the base's misfit, and the answer would depend on the base and
     not on the source."""
     st = settings or WorkflowSettings()
+    try:
+        check_one_rig(runs)
+    except HysteresisError as err:
+        raise DiscrepancyError(str(err)) from None
     model_error = None
     if ukf_evidence:
         try:
@@ -465,9 +508,17 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         raise DiscrepancyError("source=<dir of raw runs or bags> is required")
     if not cfg.get("report"):
         raise DiscrepancyError("report=<file.json> is required")
-    report_path = Path(str(cfg["report"])).resolve()
+    # never resolved: a link given as the report is refused, not followed to what it names
+    report_path = Path(os.path.abspath(os.path.expanduser(str(cfg["report"]))))
+    plots_dir = report_path.parent / f"{report_path.stem}_plots"
+    try:  # before any work: a wrong kind of output path fails now, not after the analysis
+        check_output(report_path, folder=False)
+        if cfg["plots"]:
+            check_output(plots_dir, folder=True)
+    except RigIOError as err:
+        raise DiscrepancyError(f"report={cfg['report']}: {err}") from None
     clean_leftovers(report_path.parent, recursive=False)  # temporaries of a killed run
-    clean_leftovers(report_path.parent / f"{report_path.stem}_plots")
+    clean_leftovers(plots_dir)
     progress = bool(cfg["progress"])
     settings = workflow_settings(cfg["workflow"], progress=progress)
     clean_owned_temp(TEMP_TAG)  # work folders of killed runs
@@ -496,8 +547,7 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     report["run_choice"] = run_choice or None
     report["source"] = str(Path(str(cfg["source"])).resolve())
     report["ingest"] = {"accepted": ingest_rep["n_accepted"], "rejected": ingest_rep["rejected"]}
-    plots = plot_report(full, report_path.parent / f"{report_path.stem}_plots") \
-        if cfg["plots"] else []
+    plots = plot_report(full, plots_dir) if cfg["plots"] else []
     report["plots"] = [str(p) for p in plots]
     report["elapsed_s"] = round(time.perf_counter() - t0, 3)
     write_text_atomic(report_path, json.dumps(report, indent=1, default=_json_default) + "\n")
@@ -636,7 +686,11 @@ def _main() -> None:
 
     @hydra.main(config_path="../conf", config_name="discrepancy", version_base="1.3")
     def main(cfg: DictConfig) -> None:
-        rep = run(to_container(cfg))
+        try:
+            rep = run(to_container(cfg))
+        except (DiscrepancyError, RigIOError) as err:
+            print(f"discrepancy: {err}", file=sys.stderr)
+            raise SystemExit(2) from None
         print(rep["headline"])
 
     main()

@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import time
 from collections.abc import Mapping, Sequence
 from functools import partial
@@ -350,7 +351,7 @@ def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
     cfg = schemas.with_defaults(schemas.DiscrepancyStudyConfig, cfg)
     if not cfg.get("out"):
         raise StudyError("out=<path stem> is required")
-    out = Path(str(cfg["out"])).resolve()
+    out = Path(os.path.abspath(os.path.expanduser(str(cfg["out"]))))  # links refused, not followed
     all_pairs = dict(cfg["pairs"])
     chosen = cfg["pairs_selected"] or list(all_pairs)
     missing = [p for p in chosen if p not in all_pairs]
@@ -449,11 +450,12 @@ def _main() -> None:
     import hydra
     from omegaconf import DictConfig
 
-    from pipelines.common import to_container
+    from pipelines.common import to_container, write_failure_exits
 
     @hydra.main(config_path="../conf", config_name="discrepancy_study", version_base="1.3")
     def main(cfg: DictConfig) -> None:
-        cases = run(to_container(cfg))
+        with write_failure_exits("discrepancy_study"):
+            cases = run(to_container(cfg))
         ok = sum(bool(c["halved"]) for c in cases)
         print(f"{len(cases)} cases; {ok} named first and halved; table: {cfg.out}.md")
 

@@ -28,7 +28,7 @@ from typing import Any
 from tqdm import tqdm
 
 from rig_io.atomic import clean_leftovers, contained, write_text_atomic
-from rig_io.errors import RigIOError
+from rig_io.errors import RigIOError, WriteError
 from rig_io.virtual import simulate_run, standard_campaign
 from rig_io.virtual.campaign import STANDARD_EXCITATIONS
 
@@ -115,7 +115,7 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
     dup = sorted({i for i in ids if ids.count(i) > 1})
     if dup:
         raise GenerateError(f"run ids repeat in the campaign: {dup[:5]}")
-    out = Path(out).resolve()
+    out = Path(os.path.abspath(out))  # not resolved: an output link is refused, not followed
     out.mkdir(parents=True, exist_ok=True)
     clean_leftovers(out, recursive=False)
     book_path = out / CAMPAIGN_FILE
@@ -236,6 +236,9 @@ def _main() -> None:
         except (GenerateError, ValueError) as err:
             print(f"generate: error: {err}", file=sys.stderr)
             raise SystemExit(2) from None
+        except WriteError as err:  # a full disk ...: the stage failed, one line
+            print(f"generate: {err}", file=sys.stderr)
+            raise SystemExit(1) from None
         print(f"generate: {len(report['written'])} runs written, {len(report['skipped'])} "
               f"unchanged, {report['seconds']:.1f} s -> {report['out']} ({report['format']})")
 

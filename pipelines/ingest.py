@@ -15,14 +15,17 @@ source files, ingest version and options are unchanged is not processed again. W
 ingested alone, and nothing else in ``out`` is pruned. A source that does not exist, holds
 no run is refused (exit 2) and ``out`` is left untouched; one whose runs are all rejected
 writes only its ``ingest_report.json`` (``refused``, exit 1). An empty or wrong source never
-deletes processed data. A processed file that no longer
-matches the hash recorded when it was written (truncated, edited) is processed again.
+deletes processed data. An output that cannot be written (a full disk) stops the stage with
+one line naming the file and the free space (exit 2): nothing is pruned or removed. A
+processed file that no longer matches the hash recorded when it was written (truncated,
+edited) is processed again.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 import sys
 import time
 from collections.abc import Mapping
@@ -36,7 +39,7 @@ from tqdm import tqdm
 from rig_io.atomic import clean_leftovers, write_text_atomic
 from rig_io.bag import sidecar_manifest
 from rig_io.dataset import REPORT, SAMPLES, read_runs, run_file, write_run_rows, write_runs
-from rig_io.errors import RigIOError
+from rig_io.errors import RigIOError, WriteError
 from rig_io.importer import IMPORTER_VERSION, load_mapping, matches
 from rig_io.limits import ReadLimits
 from rig_io.process import INGEST_VERSION, process_run
@@ -56,7 +59,9 @@ def run_ingest(source: str | Path, out: str | Path, *,
                progress: bool = True, limits: ReadLimits | None = None) -> dict[str, Any]:
     """Ingest every run under ``source`` into ``out``; return the report (also written)."""
     started = time.perf_counter()
-    given, dst = Path(source).resolve(), Path(out).resolve()
+    # the output is not resolved (a link at an output name is refused, not followed); the
+    # source check below compares real paths
+    given, dst = Path(source).resolve(), Path(os.path.abspath(out))
     if not given.exists():
         raise RigIOError("source does not exist (nothing ingested, nothing removed)",
                          file=str(given))
@@ -66,7 +71,8 @@ def run_ingest(source: str | Path, out: str | Path, *,
     single = single_run_source(given, mapping=plain)
     # keys (the cache) are relative to the folder holding the runs, as when it is the source
     src = given.parent if single is not None else given
-    if dst == src or src in dst.parents:
+    real_dst = dst.resolve()
+    if real_dst == src or src in real_dst.parents:
         raise RigIOError("the output folder must not be inside the source folder "
                          "(raw runs are never written)", file=str(dst))
     if single is not None:
@@ -121,6 +127,10 @@ def run_ingest(source: str | Path, out: str | Path, *,
                     "ingested_at": datetime.now(UTC).isoformat(timespec="seconds")}
             written = write_run_rows(dst, frame, meta)
             meta["output_sha256"] = file_sha256(written)
+        except WriteError:
+            # the run was fine, its output could not be stored (disk full ...): the stage
+            # stops here, before any prune, and removes nothing
+            raise
         except RigIOError as err:
             rejected.append(_rejection(s, key, err))
             continue

@@ -134,3 +134,22 @@ def mlflow_ui_command(python: str, store_uri: str, port: int) -> list[str]:
     """What ``make ui`` runs, on a given store and port (always loopback)."""
     return [python, "-m", "mlflow", "ui", "--backend-store-uri", store_uri,
             "--host", LOOPBACK, "--port", str(port), "--workers", "1"]
+
+
+#: The environment variable ``mlflow server`` reads its ``--backend-store-uri`` from (click's
+#: ``envvar`` of that option in mlflow/cli).
+BACKEND_STORE_ENV = "MLFLOW_BACKEND_STORE_URI"
+
+
+def mlflow_server_launch(python: str, store_uri: str, *, artifacts_uri: str, port: int,
+                         workers: int = 2, env: Mapping[str, str] | None = None
+                         ) -> tuple[list[str], dict[str, str]]:
+    """The command and environment of an ``mlflow server`` on loopback.
+
+    The backend store URI (a database URI with its password) goes in the environment, never
+    on the command line: every local user can read a process's arguments (``ps``), while its
+    environment is readable by its owner only.
+    """
+    cmd = [python, "-m", "mlflow", "server", "--artifacts-destination", artifacts_uri,
+           "--host", LOOPBACK, "--port", str(port), "--workers", str(workers)]
+    return cmd, {**(os.environ if env is None else env), BACKEND_STORE_ENV: store_uri}

@@ -38,7 +38,7 @@ def _color(family: str, i: int) -> Any:
 
 
 def _save(fig: Any, path: Path, dpi: int) -> Path:
-    with atomic_path(path, suffix=".png") as tmp:
+    with atomic_path(path, suffix=".png", folder=False) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
     return path

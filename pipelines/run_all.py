@@ -222,7 +222,7 @@ def _importer_name(cfg: Mapping[str, Any]) -> str:
 def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
     """Hydra-free core of ``make pipeline`` (cfg = composed ``conf/pipeline.yaml``, or a
     mapping whose missing settings take :class:`pipelines.schemas.PipelineConfig`'s defaults)."""
-    from pipelines import fit, report, tracking, unseen_shape, validate
+    from pipelines import tracking
 
     cfg = schemas.with_defaults(schemas.PipelineConfig, cfg)
     paths = Paths.from_config(cfg["paths"])
@@ -239,6 +239,43 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
                             f"{[*EXTERNAL_STAGES, *OWN_STAGES]}")
     tracker = tracking.Tracker(tracking.settings_from_config(cfg.get("tracking") or {},
                                                              root=paths.root))
+    state = _Progress()
+    try:
+        return _run_stages(cfg, paths, tracker, result, wanted, state)
+    except BaseException as exc:
+        _end_failed(tracker, state, exc)
+        raise
+
+
+@dataclass
+class _Progress:
+    """Where a pipeline is: the stage running and the parent run once it exists."""
+
+    stage: str = "start"
+    parent: str | None = None
+
+
+def _end_failed(tracker: Any, state: _Progress, exc: BaseException) -> None:
+    """A pipeline that failed (a stage raised, a write failed, it was interrupted) leaves a
+    FAILED parent run naming the stage and the error: its own when it had one, else a new
+    one, so the failure is in MLflow and no run is left RUNNING."""
+    if not tracker.enabled:
+        return
+    error = " ".join(str(exc).split())[:480] or type(exc).__name__
+    try:
+        parent = state.parent
+        if parent is None:
+            parent = tracker.start_run("pipeline", tags={"stage": "pipeline", "kind": "parent"})
+        tracker.log(parent, tags={"failed_stage": state.stage, "error": error})
+        tracker.end_run(parent, status="FAILED")
+    except Exception as err:  # noqa: BLE001 - the store may be what failed; keep the cause
+        log.warning("could not end the pipeline's MLflow run as FAILED: %s", err)
+
+
+def _run_stages(cfg: Mapping[str, Any], paths: Paths, tracker: Any, result: PipelineResult,
+                wanted: list[str], state: _Progress) -> PipelineResult:
+    from pipelines import fit, report, unseen_shape, validate
+
     total = time.perf_counter()
     if tracker.enabled:
         # Before any parallel worker exists: schema creation must happen exactly once.
@@ -248,10 +285,12 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
 
     if "generate" in wanted:
         t0 = time.perf_counter()
+        state.stage = "generate"
         result.generate_report = run_generate_stage(cfg)
         result.timings["generate"] = time.perf_counter() - t0
     if "ingest" in wanted:
         t0 = time.perf_counter()
+        state.stage = "ingest"
         result.ingest_report = run_ingest_stage(cfg)
         result.timings["ingest"] = time.perf_counter() - t0
 
@@ -268,10 +307,12 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
         planned = plan.dataset
     if "fit" in wanted:
         t0 = time.perf_counter()
+        state.stage = "fit"
         result.fits = fit.run(stage_config("fit", cfg), dataset=dataset)
         result.timings["fit"] = time.perf_counter() - t0
     if "validate" in wanted:
         t0 = time.perf_counter()
+        state.stage = "validate"
         # exactly the models of this invocation (not every model file left on disk)
         result.metrics, _ = validate.run(stage_config("validate", cfg), dataset=dataset,
                                          fits=result.fits)
@@ -282,6 +323,7 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
             log.warning("unseen_shape: skipped: %s", why)
         else:
             t0 = time.perf_counter()
+            state.stage = "unseen_shape"
             result.unseen_shape = unseen_shape.run(stage_config("unseen_shape", cfg),
                                                    dataset=planned, fits=result.fits)
             result.timings["unseen_shape"] = time.perf_counter() - t0
@@ -291,15 +333,17 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="mlflow") as pool:
         # (Hydra's compose is not thread-safe: the fit config is composed here, not there.)
         fit_cfg = stage_config("fit", cfg) if tracker.enabled else {}
-        pending = (pool.submit(_track_start, tracker, cfg, fit_cfg, paths, result)
+        pending = (pool.submit(_track_start, tracker, cfg, fit_cfg, paths, result, state)
                    if tracker.enabled else None)
         if "report" in wanted:
             t0 = time.perf_counter()
+            state.stage = "report"
             result.report = report.run(stage_config("report", cfg), metrics=result.metrics,
                                        fits=result.fits)
             result.timings["report"] = time.perf_counter() - t0
         if pending is not None:
             t0 = time.perf_counter()
+            state.stage = "tracking"
             tracking_state = pending.result()
             _track_finish(tracker, tracking_state, result)
             result.parent_run_id = tracking_state.parent
@@ -311,6 +355,7 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
         from pipelines import registry
 
         t0 = time.perf_counter()
+        state.stage = "registry"
         registry.register_pipeline(tracker, cfg, fits=result.fits, metrics=result.metrics,
                                    processed=paths.processed)
         result.timings["registry"] = time.perf_counter() - t0
@@ -321,6 +366,7 @@ def run_pipeline(cfg: Mapping[str, Any]) -> PipelineResult:
         tracker.log(result.parent_run_id, metrics={
             f"stage_seconds.{k}": v for k, v in result.timings.items()})
         tracker.end_run(result.parent_run_id)
+        state.parent = None  # ended: nothing left to mark FAILED
     log.info("pipeline: %s", ", ".join(f"{k} {v:.1f} s" for k, v in result.timings.items()))
     return result
 
@@ -335,7 +381,7 @@ class TrackState:
 
 
 def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any],
-                 paths: Paths, result: PipelineResult) -> TrackState:
+                 paths: Paths, result: PipelineResult, progress: _Progress) -> TrackState:
     """Parent run + one child per fitted model; or, when nothing changed, a pointer run."""
     from pipelines import tracking
     from pipelines.stages import Configuration
@@ -356,6 +402,7 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
         f"tags.pipeline_key = '{key}' and tags.complete = 'true'")
     parent = tracker.start_run("pipeline", tags={"stage": "pipeline", "kind": "parent",
                                                  **tags})
+    progress.parent = parent  # from here on a failure anywhere ends this run FAILED
     tracker.log(parent, params=params)
     if metrics is not None:
         tracker.log_table(parent, metrics, "tables/metrics.json")

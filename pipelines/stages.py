@@ -510,6 +510,10 @@ def fit_task(task: FitTask) -> dict[str, Any]:
     }
     start = time.perf_counter()
     try:
+        for run in task.runs:
+            refused = implausible_record(run.u, run.y)
+            if refused is not None:
+                raise PipelineError(f"run {run.run_id}: {refused}")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             model = task.family.build(task.family.config)
@@ -517,11 +521,69 @@ def fit_task(task: FitTask) -> dict[str, Any]:
                 model.fit(task.runs[0].u, task.runs[0].y)
             else:  # one parameter set, every run simulated from its own start
                 model.fit([r.u for r in task.runs], [r.y for r in task.runs])
+            refused = implausible_fit(
+                np.concatenate([r.y for r in task.runs]),
+                np.concatenate([model.predict(r.u) for r in task.runs]))
+        if refused is not None:
+            raise PipelineError(refused)
         row["model_json"] = model.to_json(indent=None)
     except Exception as exc:  # noqa: BLE001 - one bad fit must not stop the other 119
         row["error"] = f"{type(exc).__name__}: {exc}"
     row["fit_seconds"] = time.perf_counter() - start
     return row
+
+
+#: A fit whose in-sample RMSE is below this fraction of the output's quantisation step is
+#: refused (a measured record cannot be reproduced that exactly).
+EXACT_FIT_FRACTION = 1e-3
+
+
+def implausible_record(u: np.ndarray, y: np.ndarray) -> str | None:
+    """Why an identification record cannot identify a model (its output never moves while
+    its input does), or None. Ingest rejects such runs; this guards data from elsewhere."""
+    u, y = np.asarray(u, dtype=float), np.asarray(y, dtype=float)
+    if np.ptp(u) > 0 and np.ptp(y) == 0:
+        return (f"the identification record's output never moves (constant {float(y[0]):.6g} "
+                "while the input moves): nothing to identify, a model would fit it exactly")
+    return None
+
+
+def quantisation_step(y: np.ndarray) -> float | None:
+    """The step of the grid a measured output sits on (an encoder count, the last digit a
+    tracker writes), or None when its values are not on one grid (hand-made or model-made
+    data, whose exact fit is no sign of a fault)."""
+    levels = np.unique(np.asarray(y, dtype=float))
+    if levels.size < 3 or not np.isfinite(levels).all():
+        return None
+    smallest = float(np.diff(levels).min())
+    # the closest two levels may be a few steps apart (a short or fast record skips counts)
+    for parts in range(1, 17):
+        step = smallest / parts
+        k = (levels - levels[0]) / step
+        if bool(np.all(np.abs(k - np.round(k)) < 1e-3)):
+            return step
+    return None
+
+
+def implausible_fit(y: np.ndarray, predicted: np.ndarray) -> str | None:
+    """Why a fit is refused as too exact for a measured record, or None.
+
+    A measured output is quantised (and noisy), so no model reproduces it to a small fraction
+    of its quantisation step; one that does has fitted a stuck, constant or copied channel,
+    and its metrics (RMSE 0) would win every comparison and be registered.
+    """
+    y, predicted = np.asarray(y, dtype=float), np.asarray(predicted, dtype=float)
+    if y.size < 2 or predicted.shape != y.shape or not np.isfinite(predicted).all():
+        return None
+    resolution = quantisation_step(y)
+    if resolution is None:
+        return None
+    rmse = float(np.sqrt(np.mean((y - predicted) ** 2)))
+    if rmse < EXACT_FIT_FRACTION * resolution:
+        return (f"in-sample RMSE {rmse:.3g} is below {EXACT_FIT_FRACTION:g} x the output's "
+                f"resolution ({resolution:.3g}): no model fits a measured record this exactly "
+                "(a stuck or copied output?); refused, not stored")
+    return None
 
 
 def fit_models(

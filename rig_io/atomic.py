@@ -10,6 +10,12 @@
   old one back in the last case and removes temporaries of dead writers.
 * :func:`contained` builds an output path from data (run ids, rig names ...) and refuses any
   that would land outside its output root.
+* An output is never written through a symbolic link and never replaces anything but a
+  regular file (or, for a folder output, a real folder): :func:`check_output` refuses the
+  rest, before the writer starts and again just before the rename.
+* An ``OSError`` while writing (a full disk, no permission) becomes a
+  :class:`~rig_io.errors.WriteError` naming the target and the free space left: a failure of
+  the stage, which must not be mistaken for a bad input.
 
 Temporary names carry the writer's host and process id, ``.<name>.tsmtmp-<host>-<pid>-<random>
 <suffix>.tmp`` and ``.<name>.tsmold-<host>-<pid>``, so a cleaner removes only leftovers of
@@ -19,16 +25,18 @@ processes that are gone, never a parallel job's file in flight, and never anythi
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import os
 import re
 import shutil
 import socket
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from rig_io.errors import RigIOError
+from rig_io.errors import RigIOError, WriteError
 
 TMP_TAG = "tsmtmp"
 OLD_TAG = "tsmold"
@@ -128,6 +136,76 @@ def fsync_tree(path: Path) -> None:
 
 
 # --------------------------------------------------------------------------------------
+# what may be replaced
+# --------------------------------------------------------------------------------------
+
+
+def check_output(target: str | os.PathLike[str], *, folder: bool | None = False) -> Path:
+    """``target`` as an output path, or :class:`RigIOError` when writing it would follow a
+    symbolic link or replace something that is not ours to replace.
+
+    Refused: a symbolic link (a rename would drop the link, and a writer that resolved it
+    would overwrite the file it points to), a device, FIFO or socket, an existing folder where
+    a file is expected (``folder=False``) and an existing file where a folder is expected
+    (``folder=True``). ``folder=None`` accepts either. Folders above ``target`` may be links
+    (a data folder on another disk); only the output's own name is checked.
+    """
+    path = Path(target)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return path
+    except OSError as err:
+        raise RigIOError(f"output path cannot be checked: {err.strerror or err}",
+                         file=str(path)) from None
+    if stat.S_ISLNK(mode):
+        raise RigIOError("output path is a symbolic link: outputs are never written through a "
+                         "link (it would replace what it points to); remove the link or give "
+                         "another path", file=str(path))
+    if stat.S_ISDIR(mode):
+        if folder is False:
+            raise RigIOError("output path is an existing folder where a file is expected; "
+                             "remove it or give another path", file=str(path))
+        return path
+    if not stat.S_ISREG(mode):
+        raise RigIOError("output path exists and is not a regular file (a device, FIFO or "
+                         "socket); it is never replaced", file=str(path))
+    if folder is True:
+        raise RigIOError("output path is an existing file where a folder is expected; remove "
+                         "it or give another path", file=str(path))
+    return path
+
+
+def _size(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} GiB"
+
+
+def free_space(path: str | os.PathLike[str]) -> str:
+    """Free space on the file system holding ``path`` (its nearest existing folder), as text."""
+    here = Path(path)
+    while not here.exists() and here != here.parent:
+        here = here.parent
+    try:
+        usage = shutil.disk_usage(here)
+    except OSError:
+        return "free space unknown"
+    return f"{_size(usage.free)} free of {_size(usage.total)}"
+
+
+def write_error(target: str | os.PathLike[str], err: OSError) -> WriteError:
+    """The one-line :class:`WriteError` for an ``OSError`` met while writing ``target``."""
+    name = errno.errorcode.get(err.errno or 0, "") if err.errno else ""
+    reason = err.strerror or str(err) or type(err).__name__
+    return WriteError(f"cannot write: {reason}{f' ({name})' if name else ''}; "
+                      f"{free_space(Path(target).parent)} on its file system; the stage "
+                      "stopped and removed nothing", file=str(target))
+
+
+# --------------------------------------------------------------------------------------
 # atomic replace
 # --------------------------------------------------------------------------------------
 
@@ -149,51 +227,65 @@ def _replace(src: Path, target: Path) -> None:
 
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike[str], *, suffix: str = "",
-                keep_name: bool = False) -> Iterator[Path]:
+                keep_name: bool = False, folder: bool | None = None) -> Iterator[Path]:
     """Yield a temporary path beside ``target``; sync and rename it onto ``target`` on success.
 
-    Works for files and for folders (the caller creates what it needs at the yielded path).
-    With ``keep_name`` the yielded path has ``target``'s own name, inside a hidden temporary
-    folder: for writers that name inner files after their folder (rosbag2 storage files).
-    On error the temporary is removed and ``target`` is left as it was.
+    Works for files and for folders (the caller creates what it needs at the yielded path;
+    ``folder`` says which when known, so a wrong kind of existing ``target`` is refused
+    before any work, see :func:`check_output`). With ``keep_name`` the yielded path has
+    ``target``'s own name, inside a hidden temporary folder: for writers that name inner
+    files after their folder (rosbag2 storage files). On error the temporary is removed and
+    ``target`` is left as it was; an ``OSError`` (disk full ...) is raised as
+    :class:`~rig_io.errors.WriteError`.
     """
     target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
+    check_output(target, folder=folder)
     prefix = f".{target.name}.{TMP_TAG}-{_owner()}-"
     holder: Path | None = None
-    if keep_name:
-        holder = Path(tempfile.mkdtemp(prefix=prefix, suffix=f"{suffix}.tmp", dir=target.parent))
-        tmp = holder / target.name
-    else:
-        fd, tmp_name = tempfile.mkstemp(prefix=prefix, suffix=f"{suffix}.tmp",
-                                        dir=target.parent)
-        os.close(fd)
-        tmp = Path(tmp_name)
-        tmp.unlink()  # the caller decides whether this becomes a file or a folder
     try:
-        yield tmp
-        fsync_tree(tmp)
-        _replace(tmp, target)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if keep_name:
+            holder = Path(tempfile.mkdtemp(prefix=prefix, suffix=f"{suffix}.tmp",
+                                           dir=target.parent))
+            tmp = holder / target.name
+        else:
+            fd, tmp_name = tempfile.mkstemp(prefix=prefix, suffix=f"{suffix}.tmp",
+                                            dir=target.parent)
+            os.close(fd)
+            tmp = Path(tmp_name)
+            tmp.unlink()  # the caller decides whether this becomes a file or a folder
+    except OSError as err:
+        raise write_error(target, err) from err
+    try:
+        try:
+            yield tmp
+            fsync_tree(tmp)
+            # again at the end: the target may have changed while the content was made
+            check_output(target, folder=tmp.is_dir() and not tmp.is_symlink())
+            _replace(tmp, target)
+        except OSError as err:
+            raise write_error(target, err) from err
     finally:
         for leftover in (tmp, holder):
             if leftover is None:
                 continue
-            if leftover.is_dir() and not leftover.is_symlink():
-                shutil.rmtree(leftover, ignore_errors=True)
-            elif leftover.exists() or leftover.is_symlink():
-                leftover.unlink()
+            with contextlib.suppress(OSError):  # a cleanup must not hide the first error
+                if leftover.is_dir() and not leftover.is_symlink():
+                    shutil.rmtree(leftover, ignore_errors=True)
+                elif leftover.exists() or leftover.is_symlink():
+                    leftover.unlink()
 
 
 def write_text_atomic(target: str | os.PathLike[str], text: str) -> Path:
     """Write ``text`` to ``target`` atomically (UTF-8)."""
-    with atomic_path(target) as tmp:
+    with atomic_path(target, folder=False) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(target)
 
 
 def write_bytes_atomic(target: str | os.PathLike[str], data: bytes) -> Path:
     """Write ``data`` to ``target`` atomically."""
-    with atomic_path(target) as tmp:
+    with atomic_path(target, folder=False) as tmp:
         tmp.write_bytes(data)
     return Path(target)
 

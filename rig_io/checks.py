@@ -1,9 +1,10 @@
 """Semantic checks of one run that apply whatever container it came in (folder or bag).
 
 Structural problems (unreadable files, missing columns, non-numeric cells) are found by the
-readers; these functions look at values: timestamps, gaps, load-cell saturation, e-stops and
-camera confidence (rig-log-format.md section 3). Each raises :class:`RigIOError` naming the run,
-the file and the row (1-based line in the file, header = line 1) or the time.
+readers; these functions look at values: timestamps, gaps, load-cell saturation, e-stops,
+camera confidence (rig-log-format.md section 3) and position channels that never move. Each
+raises :class:`RigIOError` naming the run, the file and the row (1-based line in the file,
+header = line 1) or the time.
 """
 
 from __future__ import annotations
@@ -227,3 +228,23 @@ def check_physical_run(run: PhysicalRun, *, rows: bool = False,
         frame = getattr(run, name)
         if frame is not None:
             check_overlap(frame, t_enc, stream=name, run=run_id, file=run.file(name))
+
+
+def check_moves(values: npt.NDArray[np.float64], *, channel: str, key: str, unit: str,
+                resolution: float, run: str, file: str) -> None:
+    """A position channel must move by more than its resolution over the run (one encoder
+    count; any change for a camera or tracker value, ``resolution`` 0).
+
+    A stuck encoder (a loose coupling, a broken cable) reads one value, or dithers by one
+    count around it, while the input moves: its record holds no hysteresis, and a model fitted
+    to it reproduces it "perfectly". One count of change is quantisation, not motion.
+    """
+    finite = values[np.isfinite(values)]
+    span = float(finite.max() - finite.min()) if finite.size else 0.0
+    moved = span > resolution * (1.0 + 1e-6) if resolution > 0 else span > 0.0
+    if moved:
+        return
+    counts = (f" = {span / resolution:.3g} encoder count(s); it must move by more than its "
+              f"resolution of one count ({resolution:.3g} {unit})") if resolution > 0 else ""
+    raise RigIOError(f"{channel} never moves: its range over the run is {span:.6g} {unit}"
+                     f"{counts}", run=run, file=file, key=key)

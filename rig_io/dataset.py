@@ -66,7 +66,7 @@ def write_run_rows(out: str | os.PathLike[str], frame: pd.DataFrame,
     table = table.replace_schema_metadata(
         {META_KEY: json.dumps(embedded, default=str, sort_keys=True).encode()})
     target = run_file(out, run_id)
-    with atomic_path(target, suffix=".parquet") as tmp:
+    with atomic_path(target, suffix=".parquet", folder=False) as tmp:
         pq.write_table(table, tmp, compression="zstd")
     return target
 

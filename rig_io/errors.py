@@ -1,4 +1,5 @@
-"""The one error class of :mod:`rig_io` (as rosbags does: one error class per package)."""
+"""The one error class of :mod:`rig_io` (as rosbags does: one error class per package), and
+its one refinement, :class:`WriteError`, that a stage must not treat as a bad run."""
 
 from __future__ import annotations
 
@@ -62,3 +63,13 @@ class RigIOError(Exception):
             where.append(f"t={t_ns} ns ({t_ns / 1e9:.3f} s)")
         self.reason = _cap(str(message), MAX_REASON_CHARS)
         super().__init__(f"{', '.join(where)}: {self.reason}" if where else self.reason)
+
+
+class WriteError(RigIOError):
+    """An output could not be written (disk full, no permission, read-only file system...).
+
+    A failure of the stage, never a reject of the run being processed: a stage that meets it
+    stops without pruning or removing anything, since the input was fine and only the
+    output could not be stored. It is a :class:`RigIOError`, so callers that catch the
+    package's error still catch it; those that reject runs re-raise it first.
+    """

@@ -56,7 +56,7 @@ def write_run_folder(run: RawRun, root: str | os.PathLike[str], *,
     if not is_safe_identifier(run_id):
         raise RigIOError(f"run_id {short(run_id)} is not a safe folder name", key="run_id")
     target = Path(root) / run_id
-    with atomic_path(target) as tmp:
+    with atomic_path(target, folder=True) as tmp:
         tmp.mkdir(parents=True)
         (tmp / MANIFEST).write_text(json.dumps(run.manifest, indent=2) + "\n", encoding="utf-8")
         for name, frame in run.streams().items():

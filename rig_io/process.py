@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from rig_io.calibrate import PhysicalRun, encoder_unit, vision_unit
+from rig_io.checks import check_moves
 from rig_io.errors import RigIOError
 from rig_io.manifest import excitation_name
 from rig_io.normalise import normalise
@@ -21,7 +22,7 @@ from rig_io.schema import COLUMNS
 from rig_io.synchronise import SyncOptions, synchronise
 
 #: Bumped whenever the processing changes what a run's rows are (part of the cache key).
-INGEST_VERSION = "1.1.0"
+INGEST_VERSION = "1.2.0"
 
 
 def process_run(run: PhysicalRun, *, sync: SyncOptions | None = None
@@ -51,6 +52,14 @@ def process_run(run: PhysicalRun, *, sync: SyncOptions | None = None
         raise RigIOError(f"output ({source}) missing inside the run", run=run.run_id,
                          file=run.file(source if source != "encoder" else "encoder"),
                          t_ns=int(synced.info["t0_ns"] + round(synced.t_s[i] * 1e9)))
+    # a channel that never moves holds no hysteresis (a stuck encoder "fits" perfectly)
+    counts = float((m.get("channels") or {}).get("encoder", {}).get("counts_per_unit") or 0.0)
+    count = 1.0 / counts if counts > 0 else 0.0
+    check_moves(ch["input"][keep], channel="input (encoder)", key="input", unit=encoder_unit(m),
+                resolution=count, run=run.run_id, file=run.file("encoder"))
+    check_moves(output[keep], channel=f"output ({source})", key="output", unit=out_unit,
+                resolution=count if source == "encoder" else 0.0, run=run.run_id,
+                file=run.file(source))
     t_s = synced.t_s[keep] - synced.t_s[lo]
     # encoders count relative to their first sample (the format says so); a tracker or a
     # camera measures an absolute quantity, whose level at the start is part of the state

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -151,6 +151,48 @@ class RunData:
             starts=tuple(sorted({int(np.ceil(s / factor)) for s in self.starts})),
             record_start_s=self.record_start_s,
         )
+
+
+def describe_mix(groups: Mapping[tuple[str, ...], Sequence[str]],
+                 fields: Sequence[str]) -> str | None:
+    """``None`` when every run falls in one group, else one sentence naming what differs
+    and each group with its runs, for a refusal: ``source mixes rigs: tsm-bench (2 runs,
+    output mm) and bending-joint (2 runs, output deg); analyse each group apart: ...``.
+
+    ``groups`` maps a key (rig first, then the output's unit and quantity, as many as
+    ``fields`` names) to its run ids."""
+    if len(groups) <= 1:
+        return None
+    keys = list(groups)
+    differs = [name for i, name in enumerate(fields) if len({k[i] for k in keys}) > 1]
+
+    def label(key: tuple[str, ...]) -> str:
+        n = len(groups[key])
+        extra = ", ".join(f"output {v}" if i == 1 else str(v)
+                          for i, v in enumerate(key) if i > 0 and v)
+        return f"{key[0]} ({n} run{'s' if n != 1 else ''}{', ' + extra if extra else ''})"
+
+    def runs_of(key: tuple[str, ...]) -> str:
+        ids = list(groups[key])
+        more = f" and {len(ids) - 4} more" if len(ids) > 4 else ""
+        return f"{label(key)}: {', '.join(ids[:4])}{more}"
+
+    what = " and ".join(differs) if len(differs) < 3 else \
+        f"{', '.join(differs[:-1])} and {differs[-1]}"
+    return (f"source mixes {what}: {' and '.join(label(k) for k in keys)}; "
+            "analyse each group apart (one source folder per group): "
+            + "; ".join(runs_of(k) for k in keys))
+
+
+def check_one_rig(runs: Sequence[RunData]) -> None:
+    """Runs of several rigs are never pooled into one analysis (their outputs need not share
+    a unit or a quantity): :class:`HysteresisError` naming them."""
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for r in runs:
+        groups.setdefault((str(r.config.get("rig", "")),), []).append(r.run_id)
+    mix = describe_mix(groups, ("rigs",))
+    if mix is not None:
+        raise HysteresisError(mix)
 
 
 def split_single_runs(runs: Sequence[RunData], *, heldout_fraction: float = 0.3

@@ -165,3 +165,72 @@ def test_atomic_writes_fsync_the_file_before_the_rename_and_the_folder_after(
     monkeypatch.setattr(os, "replace", replace)
     write_text_atomic(tmp_path / "a.json", "{}")
     assert events == ["file", "rename", "dir"]
+
+
+# --------------------------------------------------------------------------------------
+# what an output may replace, and a write that fails
+# --------------------------------------------------------------------------------------
+
+
+def test_a_symlink_at_the_target_is_refused_and_what_it_names_is_untouched(
+        tmp_path: Path) -> None:
+    precious = tmp_path / "elsewhere" / "precious.txt"
+    precious.parent.mkdir()
+    precious.write_bytes(b"keep me\n")
+    link = tmp_path / "out" / "report.json"
+    link.parent.mkdir()
+    link.symlink_to(precious)
+    with pytest.raises(RigIOError, match="symbolic link"):
+        write_text_atomic(link, "new")
+    assert precious.read_bytes() == b"keep me\n"
+    assert link.is_symlink() and _siblings(link.parent) == {"report.json"}
+
+
+def test_an_existing_folder_where_a_file_is_expected_is_refused_before_the_work(
+        tmp_path: Path) -> None:
+    target = tmp_path / "report.json"
+    (target / "inner").mkdir(parents=True)
+    ran = []
+    with pytest.raises(RigIOError, match="existing folder where a file is expected"):
+        with atomic_path(target, folder=False) as tmp:
+            ran.append(tmp)
+    assert ran == [] and (target / "inner").is_dir()
+
+
+def test_a_fifo_is_never_replaced(tmp_path: Path) -> None:
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    with pytest.raises(RigIOError, match="not a regular file"):
+        write_text_atomic(fifo, "x")
+    assert fifo.exists() and not fifo.is_file()
+
+
+def test_a_target_turned_into_a_link_while_written_is_refused_at_the_rename(
+        tmp_path: Path) -> None:
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep")
+    target = tmp_path / "out.txt"
+    with pytest.raises(RigIOError, match="symbolic link"):
+        with atomic_path(target) as tmp:
+            tmp.write_text("new")
+            target.symlink_to(precious)
+    assert precious.read_text() == "keep" and target.is_symlink()
+    assert _siblings(tmp_path) == {"precious.txt", "out.txt"}
+
+
+def test_an_oserror_while_writing_is_a_write_error_naming_the_file_and_the_free_space(
+        tmp_path: Path) -> None:
+    import errno
+
+    from rig_io.errors import WriteError
+
+    target = tmp_path / "runs.json"
+    write_text_atomic(target, "old")
+    with pytest.raises(WriteError) as info:
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp))
+    msg = str(info.value)
+    assert "\n" not in msg and str(target) in msg and "No space left on device" in msg
+    assert "ENOSPC" in msg and " free of " in msg, msg
+    assert target.read_text() == "old" and _siblings(tmp_path) == {"runs.json"}

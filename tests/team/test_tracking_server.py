@@ -38,6 +38,12 @@ def test_pipeline_logs_and_registers_through_a_postgresql_backed_server(
         assert "@127.0.0.1:" in services.postgres_uri
         uri = services.tracking_uri
         assert uri.startswith("http://127.0.0.1:")
+        # the database password is in no process's arguments (ps shows them to every user)
+        password = services.postgres_uri.split("://", 1)[1].split("@", 1)[0].split(":", 1)[1]
+        assert len(password) >= 16
+        argv = _command_lines()
+        assert argv and not [a for a in argv if password in a]
+        assert [a for a in argv if "mlflow" in a and "server" in a]  # the server was seen
         root = tmp_path / "root"
         cfg = compose_stage("pipeline", [
             f"paths.root={root}", "n_jobs=1", "progress=false", "tracking=server",
@@ -87,3 +93,16 @@ def registry_tracker(uri: str) -> object:
     from pipelines import tracking
 
     return tracking.Tracker(tracking.settings_from_config({"uri": uri}, root="."))
+
+
+def _command_lines() -> list[str]:
+    """Every process's command line (what ``ps`` shows any local user)."""
+    lines = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                raw = (entry / "cmdline").read_bytes()
+            except OSError:
+                continue
+            lines.append(raw.replace(b"\0", b" ").decode(errors="replace"))
+    return lines
