@@ -814,8 +814,15 @@ def _clear_given_mappings(node: DictConfig, cfg: Mapping[str, Any]) -> None:
             _clear_given_mappings(child, value)
 
 
+def _subfolder(name: Any) -> str:
+    """``/<name>`` for a non-empty name, else nothing: ``data/reports${tsm_subfolder:x}``."""
+    return f"/{name}" if name not in (None, "") else ""
+
+
 def register() -> None:
-    """Store every schema node in Hydra's ConfigStore (idempotent)."""
+    """Store every schema node in Hydra's ConfigStore and the config resolvers (idempotent)."""
+    if not OmegaConf.has_resolver("tsm_subfolder"):
+        OmegaConf.register_new_resolver("tsm_subfolder", _subfolder)
     store = ConfigStore.instance()
     store.store(group=WORKFLOW_GROUP, name="workflow", node=WorkflowSettings)
     for stage, schema in STAGE_SCHEMAS.items():

@@ -191,7 +191,7 @@ def identification_record(by_kind: Mapping[str, Sequence[RunSignal]], run_ids: s
 
 
 #: Fewest configurations with a curve angle and a radius that a leave-one-out study needs.
-MIN_SHAPED_CONFIGURATIONS = 3
+MIN_SHAPED_CONFIGURATIONS = 2
 
 
 def not_applicable(dataset: pd.DataFrame) -> str | None:
