@@ -65,7 +65,11 @@ def _main(module: str, args: Sequence[str], cwd: str, env: Mapping[str, str], lo
         runpy.run_module(module, run_name="__main__", alter_sys=True)
     finally:
         # what the interpreter does on the way out of `python -m`, which a forked child
-        # (it leaves by os._exit) would skip: wait for non-daemon threads, run atexit hooks
+        # (it leaves by os._exit) would skip: the threading exit hooks first (they tell idle
+        # thread-pool workers, e.g. MLflow's artifact downloads, to stop), then wait for
+        # non-daemon threads, then run atexit hooks
+        for hook in list(getattr(threading, "_threading_atexits", [])):
+            hook()
         for thread in threading.enumerate():
             if thread is not threading.main_thread() and not thread.daemon:
                 thread.join()
