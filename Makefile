@@ -23,12 +23,13 @@ REPORT ?= data/reports/discrepancy.json
 help:
 	@echo "make pipeline    generate -> ingest -> fit -> validate -> report (virtual rig, local MLflow)"
 	@echo "make test        run the test suite"
-	@echo "make data        write the 72-run standard virtual campaign under data/raw/virtual/"
+	@echo "make data        write the 120-run standard virtual campaign under data/raw/virtual/"
 	@echo "make ingest      raw runs -> data/processed/ (validated parquet)"
 	@echo "make bench       benchmarks -> bench/results.json"
 	@echo "make ui          MLflow UI on http://127.0.0.1:5000"
 	@echo "make compensate  compensation experiments"
 	@echo "make discrepancy RUNS=<dir> REPORT=<file.json>"
+	@echo "make pipeline ARGS=\"importer=<mapping> source=<folder>\"  your own logs (docs/foreign-data.md)"
 	@echo "make foreign-example  a degree-scale bending joint, one run per shape: pipeline + discrepancy"
 	@echo "make discrepancy-study  detection limits and two-effect cases of the discrepancy workflow, checked (4-9 min)"
 
