@@ -106,9 +106,31 @@ def _role(meta: Mapping[str, Any], kind: str, identify: set[str]) -> str:
     return "identification" if kind in identify else "heldout"
 
 
-def _finite(col: pd.Series) -> np.ndarray | None:
+#: A channel with at most this share of its samples missing (a stream that ends a sample or
+#: two early, a short dropout) is filled by interpolation in time; beyond it, it is dropped.
+MAX_FILLED_FRACTION = 0.01
+
+
+def channel_values(col: pd.Series, t: np.ndarray) -> tuple[np.ndarray | None, str]:
+    """A channel's values and what was done to them: used as recorded, short gaps filled
+    (linear in time, the ends held) within :data:`MAX_FILLED_FRACTION` of the samples, or
+    dropped with the reason. One missing sample must not switch off a whole load cell."""
     arr = col.to_numpy(dtype=float)
-    return arr if np.isfinite(arr).all() else None
+    ok = np.isfinite(arr)
+    n, missing = arr.size, int((~ok).sum())
+    if missing == 0:
+        return arr, "used (complete)"
+    if missing == n:
+        return None, "absent"
+    edges = np.flatnonzero(np.diff(np.r_[0, (~ok).astype(np.int8), 0]))
+    longest = int(np.max(edges[1::2] - edges[::2]))
+    limit = max(1, int(MAX_FILLED_FRACTION * n))
+    if missing > limit:
+        return None, (f"dropped: {missing} of {n} samples missing (longest gap {longest}); "
+                      f"at most {limit} ({MAX_FILLED_FRACTION:.0%}) are filled")
+    filled = np.interp(t, t[ok], arr[ok])
+    return filled, (f"used ({missing} of {n} samples missing, longest gap {longest}: "
+                    "filled by interpolation in time)")
 
 
 def output_kind(meta: Mapping[str, Any]) -> tuple[str, str, str]:
@@ -143,8 +165,10 @@ def check_one_kind(meta: Mapping[str, Mapping[str, Any]]) -> None:
 def runs_from_dataset(rows: pd.DataFrame, meta: Mapping[str, Mapping[str, Any]], *,
                       identify_excitations: list[str], input_col: str = "input",
                       output_col: str = "output",
-                      rate_hz: float | None = None) -> list[RunData]:
-    """The processed rows as :class:`RunData` (configuration, role, tension, decimation)."""
+                      rate_hz: float | None = None,
+                      channels: dict[str, dict[str, str]] | None = None) -> list[RunData]:
+    """The processed rows as :class:`RunData` (configuration, role, tension, decimation);
+    ``channels`` (if given) receives, per run, what was done to each tension channel."""
     for c in (input_col, output_col):
         if c not in rows:
             raise DiscrepancyError(f"dataset has no column {c!r}")
@@ -158,13 +182,18 @@ def runs_from_dataset(rows: pd.DataFrame, meta: Mapping[str, Mapping[str, Any]],
             v = float(df[c].iloc[0])
             if math.isfinite(v):
                 config[c] = v
-        tension = _finite(df["tension_in_n"])
+        t = df["t_s"].to_numpy(float)
+        notes: dict[str, str] = {}
+        tension, notes["tension_in_n"] = channel_values(df["tension_in_n"], t)
         if tension is None and "tension_proxy" in df:
-            tension = _finite(df["tension_proxy"])
+            tension, notes["tension_proxy"] = channel_values(df["tension_proxy"], t)
+        tension_out, notes["tension_out_n"] = channel_values(df["tension_out_n"], t)
+        if channels is not None:
+            channels[str(run_id)] = notes
         run = RunData(
-            run_id=str(run_id), t=df["t_s"].to_numpy(float), u=df[input_col].to_numpy(float),
+            run_id=str(run_id), t=t, u=df[input_col].to_numpy(float),
             y=df[output_col].to_numpy(float), tension=tension,
-            tension_out=_finite(df["tension_out_n"]), config=config, excitation=kind,
+            tension_out=tension_out, config=config, excitation=kind,
             role=_role(meta.get(str(run_id), {}), kind, identify),
         )
         if rate_hz:
@@ -525,10 +554,15 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix=owned_prefix(TEMP_TAG)) as tmp:
         rows, meta, ingest_rep = ingest_source(cfg["source"], Path(tmp),
                                                mapping=cfg["importer"], progress=progress)
+    channels: dict[str, dict[str, str]] = {}
     runs = runs_from_dataset(
         rows, meta, identify_excitations=list(cfg["identify_excitations"]),
         input_col=str(cfg["signals"]["input"]), output_col=str(cfg["signals"]["output"]),
-        rate_hz=cfg["analysis_rate_hz"])
+        rate_hz=cfg["analysis_rate_hz"], channels=channels)
+    for run_id, notes in channels.items():
+        for name, note in notes.items():
+            if note not in ("used (complete)", "absent"):
+                log.info("discrepancy: %s: %s %s", run_id, name, note)
     # one run per configuration (a common way to record): its head identifies, its tail judges
     try:
         runs, run_choice = split_single_runs(
@@ -545,6 +579,7 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
         base_misfit_fallback=bool(cfg["base_misfit_fallback"]), max_bases=int(cfg["max_bases"]),
         base_retry_factor=float(cfg["base_retry_factor"]))
     report["run_choice"] = run_choice or None
+    report["channels"] = channels
     report["source"] = str(Path(str(cfg["source"])).resolve())
     report["ingest"] = {"accepted": ingest_rep["n_accepted"], "rejected": ingest_rep["rejected"]}
     plots = plot_report(full, plots_dir) if cfg["plots"] else []
