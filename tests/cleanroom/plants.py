@@ -1,7 +1,7 @@
 """Clean-room generator of synthetic hysteresis-plant data (numpy + scipy only).
 
 Written from the physics alone (textbook hysteresis models and the three reference texts
-under /work/shared/seeds), independently of any existing implementation.  It is meant to
+under ../shared/seeds), independently of any existing implementation.  It is meant to
 produce *test data* for a hysteresis-modelling product: excitations like the ones of the
 reference rigs, plants with a known ground truth, and records in the rig / catheter layouts.
 
