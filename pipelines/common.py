@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import contextlib
 import os
 import sys
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
@@ -14,7 +13,6 @@ import pandas as pd
 
 from pipelines import cache
 from pipelines.stages import PipelineError
-from rig_io.errors import WriteError
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 CONF_DIR = REPO_ROOT / "conf"
@@ -34,17 +32,6 @@ def sweep_id() -> str:
         value = f"{os.getpid()}-{secrets.token_hex(3)}"
         os.environ[SWEEP_ID_ENV] = value
     return value
-
-
-@contextlib.contextmanager
-def write_failure_exits(stage: str) -> Iterator[None]:
-    """In a stage's entry point: an output that cannot be written (a full disk, no
-    permission) ends the stage with one line on stderr and exit status 1, not a traceback."""
-    try:
-        yield
-    except WriteError as err:
-        print(f"{stage}: {err}", file=sys.stderr)
-        raise SystemExit(1) from None
 
 
 def _register_resolvers() -> None:
@@ -85,16 +72,19 @@ def exit_with_parent(parent_pid: int, *, poll_s: float = 0.5) -> None:
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
-def run_stage(stage: str, entry: Callable[[], T]) -> T:
+def run_stage(stage: str, entry: Callable[[], T],
+              errors: tuple[type[Exception], ...] = ()) -> T:
     """A stage's Hydra entry point: a :class:`PipelineError` (a store that cannot be opened,
-    nothing to fit ...) or a :class:`~rig_io.errors.RigIOError` (an unreadable dataset or
-    run index) ends it with one line on stderr and exit status 2 instead of a traceback.
+    nothing to fit ...), a :class:`~rig_io.errors.RigIOError` (an unreadable dataset or run
+    index, an output that cannot be written: a full disk) or one of the stage's own
+    ``errors`` ends it with one line on stderr and exit status 2 instead of a traceback.
     Inside a sweep job the error propagates, so the launcher records the job as failed."""
     from rig_io.errors import RigIOError
 
+    caught: tuple[type[Exception], ...] = (PipelineError, RigIOError, *errors)
     try:
         return entry()
-    except (PipelineError, RigIOError) as err:
+    except caught as err:
         if hydra_sweep_dir() is not None:
             raise
         print(f"{stage}: {err}", file=sys.stderr)

@@ -59,7 +59,7 @@ from hysteresis.compensation import (
 )
 from hysteresis.shape_aware import ShapeAwareModel
 from pipelines import schemas
-from pipelines.common import to_container, write_failure_exits
+from pipelines.common import run_stage, to_container
 from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -879,8 +879,7 @@ def _main() -> None:
 
     @hydra.main(config_path="../conf", config_name="compensate", version_base="1.3")
     def main(cfg: DictConfig) -> None:
-        with write_failure_exits("compensate"):
-            tables = run(to_container(cfg))
+        tables = run_stage("compensate", lambda: run(to_container(cfg)))
         for name, frame in tables.items():
             log.info("%s: %d rows", name, len(frame))
 

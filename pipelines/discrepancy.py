@@ -17,7 +17,6 @@ import json
 import logging
 import math
 import os
-import sys
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -717,15 +716,12 @@ def _main() -> None:
     import hydra
     from omegaconf import DictConfig
 
-    from pipelines.common import to_container
+    from pipelines.common import run_stage, to_container
 
     @hydra.main(config_path="../conf", config_name="discrepancy", version_base="1.3")
     def main(cfg: DictConfig) -> None:
-        try:
-            rep = run(to_container(cfg))
-        except (DiscrepancyError, RigIOError) as err:
-            print(f"discrepancy: {err}", file=sys.stderr)
-            raise SystemExit(2) from None
+        rep = run_stage("discrepancy", lambda: run(to_container(cfg)),
+                        errors=(DiscrepancyError,))
         print(rep["headline"])
 
     main()

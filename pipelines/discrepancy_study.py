@@ -450,12 +450,11 @@ def _main() -> None:
     import hydra
     from omegaconf import DictConfig
 
-    from pipelines.common import to_container, write_failure_exits
+    from pipelines.common import run_stage, to_container
 
     @hydra.main(config_path="../conf", config_name="discrepancy_study", version_base="1.3")
     def main(cfg: DictConfig) -> None:
-        with write_failure_exits("discrepancy_study"):
-            cases = run(to_container(cfg))
+        cases = run_stage("discrepancy_study", lambda: run(to_container(cfg)))
         ok = sum(bool(c["halved"]) for c in cases)
         print(f"{len(cases)} cases; {ok} named first and halved; table: {cfg.out}.md")
 
