@@ -377,13 +377,13 @@ class GammaModel(StatefulModel):
         return np.column_stack([a, np.ones(a.shape[0])]) if self.fit_offset else a
 
     def _solve(self, plays: Any, yy: FloatArray,
-               constraint: str | None = None) -> tuple[FloatArray, float]:
+               constraint: str) -> tuple[FloatArray, float]:
         """Exact (constrained) least squares for ``Q`` (and the offset) on one play matrix."""
         a = self._design(plays)
         if a.shape[0] < a.shape[1]:
             raise HysteresisError(f"need at least {a.shape[1]} samples to fit, got {a.shape[0]}")
         return solve_play_weights(a, yy, n_weights=np.asarray(plays).shape[1],
-                                  constraint=constraint or self._resolved_constraint())
+                                  constraint=constraint)
 
     # -- simulation -------------------------------------------------------------------
     def initial_state(self, u0: float = 0.0) -> GammaState:

@@ -233,11 +233,11 @@ class PreisachModel(StatefulModel):
             sign, _ = choose_form(
                 lambda form: type(self)(**{**params, "density_sign": form}),
                 ("positive", "negative"), recs)
-        self._fit_form(recs, str(self.density), str(sign))
+        self._fit_signed(recs, str(sign))
         return self
 
-    def _fit_form(self, recs: Records, density: str, sign: str) -> None:
-        """Identify the plane on ``recs`` with the density's kind and sign fixed."""
+    def _fit_signed(self, recs: Records, sign: str) -> None:
+        """Identify the plane on ``recs`` with the density's sign fixed."""
         self._set_plane(recs.u)
         every = int(self.fit_every)
         blocks = []
@@ -248,14 +248,14 @@ class PreisachModel(StatefulModel):
         rows = blocks[0] if len(blocks) == 1 else np.vstack(blocks)
         target = np.concatenate([yy[::every] for _, yy in recs.pairs()])
         u_rows = np.concatenate([uu[::every] for uu, _ in recs.pairs()])
+        sgn = 1.0 if sign == "positive" else -1.0
         # Small dense algebra: BLAS threads only add contention (the pipeline already fits
         # configurations in parallel), so identification runs single-threaded.
-        sgn = 1.0 if sign == "positive" else -1.0
         with single_thread_blas():
-            if density == "nonparametric":
+            if self.density == "nonparametric":
                 self._fit_nonparametric(rows, target, u_rows, sgn)
             else:
-                self._fit_parametric(rows, target, recs.u, u_rows, sgn, density)
+                self._fit_parametric(rows, target, recs.u, u_rows, sgn)
         self.density_sign_ = sign
         if sgn < 0 and not self._rises(recs):
             # a negative plane below a small reversible gain fits an output that falls with
@@ -282,7 +282,7 @@ class PreisachModel(StatefulModel):
         self.density_params_ = np.zeros(0)
 
     def _fit_parametric(self, rows: FloatArray, target: FloatArray, u: FloatArray,
-                        u_rows: FloatArray, sgn: float, density: str) -> None:
+                        u_rows: FloatArray, sgn: float) -> None:
         # x = (N, H0, sigma, centre, kappa, offset, gain); N, offset, gain enter linearly.
         half = 0.5 * float(u.max() - u.min())
         centre0 = 0.5 * float(u.max() + u.min())
@@ -295,7 +295,7 @@ class PreisachModel(StatefulModel):
         raug = scipy_qr(aug, mode="r", overwrite_a=True, check_finite=False)[0]
         rmat, qt = raug[: k + 2, : k + 2], raug[: k + 2, k + 2]
         r_cells, r_off, r_gain = rmat[:, :k], rmat[:, k], rmat[:, k + 1]
-        spread_free = self.free_spread and density != "lorentzian"
+        spread_free = self.free_spread and self.density != "lorentzian"
         rev = bool(self.reversible)
 
         def linear_part(x: FloatArray) -> tuple[FloatArray, FloatArray]:
