@@ -69,10 +69,15 @@ def hash_files(paths: Iterable[Path]) -> str:
     h = hashlib.sha256()
     for path in sorted(Path(p) for p in paths):
         h.update(path.name.encode())
-        with path.open("rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
+        _feed(h, path)
     return _digest(h)
+
+
+def _feed(h: Any, path: Path) -> None:
+    """Add a file's bytes to the hash ``h``, a megabyte at a time."""
+    with Path(path).open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
 
 
 def hash_path(path: Path) -> str:
@@ -162,9 +167,7 @@ DIGEST_SUFFIX = ".sha256"
 def sha256_file(path: Path) -> str:
     """Full hex SHA-256 of a file's bytes."""
     h = hashlib.sha256()
-    with Path(path).open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
+    _feed(h, path)
     return h.hexdigest()
 
 

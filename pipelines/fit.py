@@ -229,12 +229,15 @@ def joblib_runner(n_jobs: int, *, progress: bool) -> Callable[..., list[dict[str
 def _progress_log(tasks: Sequence[FitTask], *, progress: bool
                   ) -> Callable[[dict[str, Any]], dict[str, Any]]:
     """Announce fits on large runs; return the callback logging each finished fit."""
-    large = [t for t in tasks if t.runs[0].u.size >= LARGE_RUN]
+    def longest(t: FitTask) -> stages.RunSignal:
+        return max(t.runs, key=lambda r: r.u.size)
+
+    large = [t for t in tasks if longest(t).u.size >= LARGE_RUN]
     if large:
-        big = max(large, key=lambda t: t.runs[0].u.size)
+        big = longest(max(large, key=lambda t: longest(t).u.size))
         log.info("fit: %d of %d models identify on runs of %d samples or more (largest: %s, "
                  "%d samples); each may take minutes", len(large), len(tasks), LARGE_RUN,
-                 big.runs[0].run_id, big.runs[0].u.size)
+                 big.run_id, big.u.size)
     start = time.perf_counter()
     level = logging.DEBUG if progress else logging.INFO
     count = [0]

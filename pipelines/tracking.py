@@ -32,6 +32,8 @@ from typing import Any, TypeVar
 
 import pandas as pd
 
+from pipelines.stages import PipelineError
+
 log = logging.getLogger(__name__)
 
 #: Environment variable through which a parent run id reaches stage processes and sweep jobs.
@@ -129,7 +131,6 @@ def retry(fn: Callable[..., T], *args: Any, attempts: int = 8, **kwargs: Any) ->
 def store_error(settings: TrackingSettings, exc: BaseException) -> Exception:
     """A store that cannot be opened, as one line naming it and what to do (a
     :class:`~pipelines.stages.PipelineError`; the stage entry points print it alone)."""
-    from pipelines.stages import PipelineError
 
     uri = settings.tracking_uri
     text = f"{type(exc).__name__}: {exc}"
@@ -650,8 +651,6 @@ def _eq(column: pd.Series, value: float | None) -> pd.Series:
 # --------------------------------------------------------------------------------------
 
 from hydra.experimental.callback import Callback as _HydraCallback  # noqa: E402
-
-from pipelines.stages import PipelineError  # noqa: E402
 
 
 class MlflowSweepCallback(_HydraCallback):

@@ -22,6 +22,18 @@ from tests.pipelines.pipeline_data import make_dataset, mlflow_store, stage_cfg
 REPO = Path(__file__).resolve().parents[2]
 
 
+def _store_with_model_runs(root: Path, fits: pd.DataFrame, metrics: pd.DataFrame,
+                           data_hash: str) -> tracking.Tracker:
+    """A new store at ``root`` holding a parent run and one model run per fit."""
+    mlflow_store(root)
+    tracker = tracking.Tracker(tracking.settings_from_config({}, root=root))
+    parent = tracker.start_run("pipeline", tags={"kind": "parent"})
+    tracking.log_model_runs(tracker, parent, fits=fits, metrics=metrics, base_params={},
+                            tags={"dataset_hash": data_hash})
+    tracker.end_run(parent)
+    return tracker
+
+
 @pytest.fixture(scope="module")
 def registered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     root = tmp_path_factory.mktemp("registry")
@@ -29,12 +41,7 @@ def registered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     cfg = stage_cfg(root, heldout=["triangle_decay", "trapezoid_decay"])
     fits = fit_stage.run(cfg, dataset=data)
     metrics, _ = validate_stage.run(cfg, dataset=data)
-    mlflow_store(root)
-    tracker = tracking.Tracker(tracking.settings_from_config({}, root=root))
-    parent = tracker.start_run("pipeline", tags={"kind": "parent"})
-    tracking.log_model_runs(tracker, parent, fits=fits, metrics=metrics, base_params={},
-                            tags={"dataset_hash": "h1"})
-    tracker.end_run(parent)
+    tracker = _store_with_model_runs(root, fits, metrics, "h1")
     done = registry.register_champions(tracker, fits, metrics, data_hash="h1")
     return {"root": root, "data": data, "fits": fits, "metrics": metrics, "tracker": tracker,
             "done": done}
@@ -115,12 +122,7 @@ def test_two_processes_registering_at_once_add_one_version_per_configuration(
     fits, metrics = registered["fits"], registered["metrics"]
     assert isinstance(fits, pd.DataFrame) and isinstance(metrics, pd.DataFrame)
     root = tmp_path / "store"
-    mlflow_store(root)
-    tracker = tracking.Tracker(tracking.settings_from_config({}, root=root))
-    parent = tracker.start_run("pipeline", tags={"kind": "parent"})
-    tracking.log_model_runs(tracker, parent, fits=fits, metrics=metrics, base_params={},
-                            tags={"dataset_hash": "h-race"})
-    tracker.end_run(parent)
+    tracker = _store_with_model_runs(root, fits, metrics, "h-race")
     fits.to_pickle(tmp_path / "fits.pkl")
     metrics.to_pickle(tmp_path / "metrics.pkl")
     ctx = multiprocessing.get_context("spawn")  # no store connection inherited by a fork
