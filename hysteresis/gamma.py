@@ -329,7 +329,7 @@ class GammaModel(StatefulModel):
                       constraint: str | None = None) -> tuple[FloatArray, float]:
         """(thresholds, start position) of the best candidate, screened on the QR-reduced
         problem (see :meth:`_best_fit`); no solve on the full record."""
-        constraint = constraint or self._resolved_constraint()
+        constraint = constraint or self.weight_constraint
         spans = self._threshold_candidates(recs.u)
         positions = self._positions()
         if len(spans) == 1 and len(positions) == 1:
@@ -344,7 +344,8 @@ class GammaModel(StatefulModel):
         _, i, pos = min(screened)
         return spans[i], pos
 
-    def _resolved_constraint(self) -> str:
+    @property
+    def weight_constraint(self) -> str:
         """The constraint in force: the fitted one, else the setting (``auto`` screens as
         its physical form until a fit decides)."""
         fitted = getattr(self, "constraint_", None)

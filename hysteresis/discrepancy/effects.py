@@ -835,7 +835,4 @@ def fit_joint(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect, 
 def _weight_constraint(base: Any) -> str:
     """The constraint a play-sum base's weights were (or will be) solved under: the one its
     fit chose (``constraint_``), else its setting (``auto`` solves as its physical form)."""
-    resolved = getattr(base, "_resolved_constraint", None)
-    if callable(resolved):
-        return str(resolved())
-    return str(getattr(base, "constraint", "free"))
+    return str(getattr(base, "weight_constraint", None) or getattr(base, "constraint", "free"))
