@@ -41,6 +41,7 @@ from hysteresis.discrepancy.workflow import (
     run_workflow,
     strip_private,
 )
+from hysteresis.roles import manifest_role, run_role
 from pipelines import schemas
 from rig_io.atomic import (
     atomic_path,
@@ -57,7 +58,6 @@ log = logging.getLogger(__name__)
 #: Work folders in the temp dir: ``tsm-discrepancy-<host>-<pid>-*`` (leaks of killed runs
 #: are removed when the stage starts).
 TEMP_TAG = "tsm-discrepancy"
-HELDOUT_ROLES = ("held_out", "heldout", "validation", "test")
 
 
 class DiscrepancyError(Exception):
@@ -97,12 +97,11 @@ def rows_from_raw(raw_runs: list[Any]) -> tuple[pd.DataFrame, dict[str, dict[str
     return pd.concat(frames, ignore_index=True), meta
 
 
-def _role(meta: Mapping[str, Any], kind: str, identify: set[str]) -> str:
-    exc = (meta.get("manifest") or {}).get("excitation") or meta.get("excitation") or {}
-    role = str(exc.get("role", "")).lower() if isinstance(exc, Mapping) else ""
-    if role:
-        return "heldout" if role in HELDOUT_ROLES else "identification"
-    return "identification" if kind in identify else "heldout"
+def _role(run_id: str, meta: Mapping[str, Any], kind: str, identify: set[str]) -> str:
+    try:
+        return run_role(manifest_role(meta, run_id=run_id), kind, identify)
+    except HysteresisError as err:
+        raise DiscrepancyError(str(err)) from None
 
 
 #: A channel with at most this share of its samples missing (a stream that ends a sample or
@@ -193,7 +192,7 @@ def runs_from_dataset(rows: pd.DataFrame, meta: Mapping[str, Mapping[str, Any]],
             run_id=str(run_id), t=t, u=df[input_col].to_numpy(float),
             y=df[output_col].to_numpy(float), tension=tension,
             tension_out=tension_out, config=config, excitation=kind,
-            role=_role(meta.get(str(run_id), {}), kind, identify),
+            role=_role(str(run_id), meta.get(str(run_id), {}), kind, identify),
         )
         if rate_hz:
             run = run.decimated(max(1, int(round(1.0 / (rate_hz * run.dt)))))

@@ -25,8 +25,18 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from hysteresis.base import HysteresisModel
+from hysteresis.base import HysteresisError, HysteresisModel
 from hysteresis.metrics import METRIC_NAMES, error_statistics
+from hysteresis.roles import (
+    HELDOUT,
+    IDENTIFICATION,
+    TAIL,
+    check_heldout_fraction,
+    manifest_role,
+    normalise_role,
+    split_note,
+    tail_start,
+)
 from pipelines import cache
 
 #: The columns of ``data/reports/metrics.parquet``, in order.
@@ -248,11 +258,6 @@ class FitTask:
     key: str
 
 
-#: Manifest ``excitation.role`` values that mark a run for identification / for judging only.
-IDENTIFY_ROLES = ("identify", "identification", "fit", "train")
-HELDOUT_ROLES = ("held_out", "heldout", "validation", "test")
-#: Suffix of the held-out tail of a configuration recorded in one run.
-TAIL = ".tail"
 
 
 @dataclass(frozen=True)
@@ -290,10 +295,12 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
     ``<kind>.heldout`` where the same kind also identifies). A configuration the rule cannot
     decide is left to :func:`identification_runs`, whose error names the option to set.
     """
-    roles = {str(k): str(v).lower() for k, v in (roles or {}).items() if v}
-    if not 0.05 <= single_run_heldout_fraction <= 0.5:
-        raise PipelineError("single_run_heldout_fraction must be in [0.05, 0.5], got "
-                            f"{single_run_heldout_fraction}")
+    try:
+        given = {str(k): normalise_role(v, run_id=str(k)) for k, v in (roles or {}).items()}
+        check_heldout_fraction(single_run_heldout_fraction)
+    except HysteresisError as err:
+        raise PipelineError(str(err)) from None
+    roles = {k: v for k, v in given.items() if v is not None}
     fit_kinds, held_kinds = list(fit_excitations), list(heldout)
     configured = set(fit_kinds)
     chosen = set(map(str, fit_runs))
@@ -304,7 +311,7 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
     for key, rows in dataset.groupby(keys, sort=True, dropna=False, observed=True):
         label = Configuration(str(key[0]), _num(key[1]), _num(key[2])).label
         by_run = {str(r): g for r, g in rows.groupby("run_id", sort=True, observed=True)}
-        marked = [r for r in by_run if roles.get(r) in IDENTIFY_ROLES]
+        marked = [r for r in by_run if roles.get(r) == IDENTIFICATION]
         if marked:
             chosen.update(marked)
             all_marked.update(marked)
@@ -315,7 +322,7 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
             notes[label] = f"manifest role identify: {', '.join(marked)}"
             pieces.append(rows)
             continue
-        usable = [r for r in by_run if roles.get(r) not in HELDOUT_ROLES]
+        usable = [r for r in by_run if roles.get(r) != HELDOUT]
         has_kind = any(str(by_run[r]["excitation"].iloc[0]) in configured for r in usable)
         if has_kind or len(by_run) != 1 or not usable or chosen.intersection(by_run):
             pieces.append(rows)
@@ -323,8 +330,8 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
         (run_id, run), = by_run.items()
         run = run.sort_values("t_s", kind="stable")
         kind = str(run["excitation"].iloc[0])
-        cut = int(round(len(run) * (1.0 - single_run_heldout_fraction)))
-        if cut < 20 or len(run) - cut < 20:
+        cut = tail_start(len(run), single_run_heldout_fraction)
+        if cut is None:
             pieces.append(rows)
             continue
         head, tail = run.iloc[:cut].copy(), run.iloc[cut:].copy()
@@ -336,10 +343,8 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
         if kind + TAIL not in held_kinds:
             held_kinds.append(kind + TAIL)
         t = run["t_s"].to_numpy(dtype=np.float64)
-        notes[label] = (f"one run ({run_id}): identifies on its first {t[cut] - t[0]:.1f} s, "
-                        f"judged on its last {t[-1] - t[cut]:.1f} s "
-                        f"({100 * single_run_heldout_fraction:.0f} %, excitation "
-                        f"{kind + TAIL!r})")
+        notes[label] = split_note(str(run_id), t[cut] - t[0], t[-1] - t[cut],
+                                  single_run_heldout_fraction, kind + TAIL)
     out = pd.concat(pieces, ignore_index=True) if pieces else dataset
     for col in ("run_id", "excitation"):
         if isinstance(dataset[col].dtype, pd.CategoricalDtype):
@@ -358,7 +363,7 @@ def _held_out_by_role(dataset: pd.DataFrame, roles: Mapping[str, str],
     """Every run whose role is held-out is scored as held out (its kind joins
     ``held_kinds``, in place); where its kind also identifies, it is renamed
     ``<kind>.heldout`` so that it is never scored in the fit split."""
-    held_runs = sorted(r for r, role in roles.items() if role in HELDOUT_ROLES)
+    held_runs = sorted(r for r, role in roles.items() if role == HELDOUT)
     if not held_runs:
         return dataset
     mask = dataset["run_id"].astype(str).isin(held_runs)
@@ -381,13 +386,16 @@ def _held_out_by_role(dataset: pd.DataFrame, roles: Mapping[str, str],
 
 
 def manifest_roles(runs_meta: Mapping[str, Mapping[str, Any]]) -> dict[str, str]:
-    """``run_id -> excitation.role`` from ingest's ``runs.json`` (runs without one omitted)."""
+    """``run_id -> role`` (:data:`~hysteresis.roles.IDENTIFICATION` or
+    :data:`~hysteresis.roles.HELDOUT`) from ingest's ``runs.json``; runs without one omitted."""
     out: dict[str, str] = {}
     for run_id, meta in runs_meta.items():
-        exc = (meta.get("manifest") or {}).get("excitation") or meta.get("excitation") or {}
-        role = exc.get("role") if isinstance(exc, Mapping) else None
-        if role:
-            out[str(run_id)] = str(role).lower()
+        try:
+            role = manifest_role(meta, run_id=str(run_id))
+        except HysteresisError as err:
+            raise PipelineError(str(err)) from None
+        if role is not None:
+            out[str(run_id)] = role
     return out
 
 

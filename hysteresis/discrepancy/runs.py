@@ -11,8 +11,15 @@ import numpy as np
 
 from hysteresis.base import HysteresisError, as_1d
 from hysteresis.discrepancy._ops import FloatArray, direction, velocity
+from hysteresis.roles import (
+    HELDOUT,
+    IDENTIFICATION,
+    check_heldout_fraction,
+    split_note,
+    tail_start,
+)
 
-ROLES = ("identification", "heldout")
+ROLES = (IDENTIFICATION, HELDOUT)
 
 
 @dataclass(eq=False)
@@ -203,8 +210,7 @@ def split_single_runs(runs: Sequence[RunData], *, heldout_fraction: float = 0.3
 
     Configurations with several runs are left as they are: their roles decide.
     """
-    if not 0.05 <= heldout_fraction <= 0.5:
-        raise HysteresisError(f"heldout_fraction must be in [0.05, 0.5], got {heldout_fraction}")
+    check_heldout_fraction(heldout_fraction)
     by: dict[str, list[RunData]] = {}
     for r in runs:
         by.setdefault(r.config_key, []).append(r)
@@ -215,15 +221,14 @@ def split_single_runs(runs: Sequence[RunData], *, heldout_fraction: float = 0.3
             out.extend(rs)
             continue
         run = rs[0]
-        cut = int(round(run.n * (1.0 - heldout_fraction)))
-        if cut < 20 or run.n - cut < 20:
+        cut = tail_start(run.n, heldout_fraction)
+        if cut is None:
             out.append(run)
             continue
-        out += [run.segment(0, cut, role="identification", suffix="head"),
-                run.segment(cut, run.n, role="heldout", suffix="tail", keep_history=True)]
-        notes[key] = (f"one run ({run.run_id}): identifies on its first "
-                      f"{run.t[cut] - run.t[0]:.1f} s, judged on its last "
-                      f"{run.t[-1] - run.t[cut]:.1f} s ({100 * heldout_fraction:.0f} %)")
+        out += [run.segment(0, cut, role=IDENTIFICATION, suffix="head"),
+                run.segment(cut, run.n, role=HELDOUT, suffix="tail", keep_history=True)]
+        notes[key] = split_note(run.run_id, run.t[cut] - run.t[0], run.t[-1] - run.t[cut],
+                                heldout_fraction)
     return out, notes
 
 
