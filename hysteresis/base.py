@@ -211,7 +211,9 @@ def choose_form(build: Any, forms: Sequence[Any], records: Records) -> tuple[Any
     unfitted model. Returns the chosen form and every form's held-out squared error.
 
     A later form must lower the error by :data:`CHOICE_GAIN` to be chosen; a form whose fit
-    fails scores infinity. Records too short to split are judged in-sample.
+    fails scores infinity. Records too short to split are judged in-sample. A model that
+    fitted one offset per record (``record_offsets_``) predicts each tail with its own
+    record's offset: head and tail are one run, and its zero is known from the head.
     """
     heads, tails = [], []
     for uu, yy in records.pairs():
@@ -225,8 +227,11 @@ def choose_form(build: Any, forms: Sequence[Any], records: Records) -> tuple[Any
         try:
             model = build(form).fit([h[0] for h in heads], [h[1] for h in heads])
             err = 0.0
-            for (uu, yy), cut in zip(records.pairs(), tails, strict=True):
+            own = getattr(model, "record_offsets_", None)
+            for i, ((uu, yy), cut) in enumerate(zip(records.pairs(), tails, strict=True)):
                 pred = np.asarray(model.predict(uu), dtype=np.float64)
+                if own is not None:
+                    pred = pred + (float(own[i]) - float(model.offset_))
                 part = slice(cut, None) if cut < uu.size else slice(None)
                 err += float(np.sum((pred[part] - yy[part]) ** 2))
             scores.append(err if math.isfinite(err) else math.inf)

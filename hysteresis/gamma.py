@@ -125,6 +125,12 @@ class GammaModel(StatefulModel):
         ``"sum_to_one"`` (seed 001 eq. 4.10 as the text means it).
     fit_offset:
         Also fit a constant output offset (not in the thesis).
+    record_offsets:
+        With ``fit_offset`` and several identification records: each record gets its own
+        offset (a run-to-run zero: a tracker re-zeroed per run, a catheter that settles a few
+        degrees elsewhere from one run to the next), so that their spread does not bend the
+        weights; ``offset_`` (used from rest) is their plain mean, one vote per run, and
+        ``record_offsets_`` keeps them. One record: the same fit as without.
     start_state:
         ``"fit"``: every play at ``w = u0 - position p`` at the first input ``u0``, the
         position (:data:`START_POSITIONS`) fitted on the identification record
@@ -149,6 +155,7 @@ class GammaModel(StatefulModel):
         thresholds: list[float] | None = None,
         constraint: str = "auto",
         fit_offset: bool = True,
+        record_offsets: bool = True,
         start_state: str = "fit",
         inverse_method: str = "exact",
         search_radius: float | None = None,
@@ -160,6 +167,7 @@ class GammaModel(StatefulModel):
         self.thresholds = thresholds
         self.constraint = constraint
         self.fit_offset = fit_offset
+        self.record_offsets = record_offsets
         self.start_state = start_state
         self.inverse_method = inverse_method
         self.search_radius = search_radius
@@ -291,7 +299,10 @@ class GammaModel(StatefulModel):
         self.start_position_ = pos
         self.thresholds_ = p
         self.weights_ = np.ascontiguousarray(x[:n])
-        self.offset_ = float(x[n]) if self.fit_offset else 0.0
+        offsets = np.asarray(x[n:], dtype=np.float64)
+        self.offset_ = float(np.mean(offsets)) if offsets.size else 0.0
+        if offsets.size > 1:
+            self.record_offsets_ = offsets
         self.lagrange_multiplier_ = lam
         self.constraint_ = constraint
         self.sse_ = sse
@@ -314,8 +325,12 @@ class GammaModel(StatefulModel):
         """
         p, pos = self._choose_setup(recs, constraint)
         plays = self._plays(recs, p, pos)
-        x, lam = self._solve(plays, recs.y, constraint)
-        resid = self._design(plays) @ x - recs.y
+        x, lam = self._solve(plays, recs.y, constraint, recs)
+        n = p.size
+        if x.size > n + 1:  # the error as the model predicts: with the mean record offset
+            resid = np.asarray(plays) @ x[:n] + float(np.mean(x[n:])) - recs.y
+        else:
+            resid = self._design(plays) @ x - recs.y
         return float(resid @ resid), p, x, lam, pos
 
     def _plays(self, recs: Records, p: FloatArray, pos: float) -> FloatArray:
@@ -357,7 +372,7 @@ class GammaModel(StatefulModel):
         """Squared error of the candidate (thresholds ``p``, start ``pos``), through the QR
         reduction: ``||A x - y||^2 = ||R x - Q^T y||^2 + ||y||^2 - ||Q^T y||^2``."""
         yy = recs.y
-        a = self._design(self._plays(recs, p, pos))
+        a = self._design(self._plays(recs, p, pos), recs)
         with single_thread_blas():
             gram, aty = a.T @ a, a.T @ yy
             try:  # R^T R = A^T A: R is Q^T A's triangle (up to signs), for a fraction of a QR
@@ -373,14 +388,22 @@ class GammaModel(StatefulModel):
         e = r @ x - qty
         return float(e @ e) + max(rest, 0.0)
 
-    def _design(self, plays: Any) -> FloatArray:
+    def _design(self, plays: Any, recs: Records | None = None) -> FloatArray:
+        """Plays, then the offset column(s): one, or one per record (``record_offsets``)."""
         a = np.asarray(plays)
-        return np.column_stack([a, np.ones(a.shape[0])]) if self.fit_offset else a
+        if not self.fit_offset:
+            return a
+        if recs is None or recs.n_records == 1 or not self.record_offsets:
+            return np.column_stack([a, np.ones(a.shape[0])])
+        ones = np.zeros((a.shape[0], recs.n_records))
+        for j, part in enumerate(recs.slices()):
+            ones[part, j] = 1.0
+        return np.column_stack([a, ones])
 
-    def _solve(self, plays: Any, yy: FloatArray,
-               constraint: str) -> tuple[FloatArray, float]:
-        """Exact (constrained) least squares for ``Q`` (and the offset) on one play matrix."""
-        a = self._design(plays)
+    def _solve(self, plays: Any, yy: FloatArray, constraint: str,
+               recs: Records | None = None) -> tuple[FloatArray, float]:
+        """Exact (constrained) least squares for ``Q`` (and the offsets) on one play matrix."""
+        a = self._design(plays, recs)
         if a.shape[0] < a.shape[1]:
             raise HysteresisError(f"need at least {a.shape[1]} samples to fit, got {a.shape[0]}")
         return solve_play_weights(a, yy, n_weights=np.asarray(plays).shape[1],

@@ -70,16 +70,53 @@ def test_joint_fit_scores_every_record_from_its_own_start(family: str, runs) -> 
 
 def test_gamma_joint_fit_is_the_least_squares_of_the_stacked_own_start_designs(runs) -> None:
     """The weights of a list fit are exactly the non-negative least squares over every
-    record's own play matrix (each started by the fitted start rule at its first input)."""
+    record's own play matrix (each started by the fitted start rule at its first input), with
+    one offset column per record; the offset used from rest is their mean."""
     pairs = runs["play_sum"]
     us, ys = [u for u, _ in pairs], [y for _, y in pairs]
     model = make_family("gamma", constraint="nonneg").fit(us, ys)
-    design = np.vstack([np.column_stack([model.design_matrix(u), np.ones(u.size)]) for u in us])
+    blocks = []
+    for j, u in enumerate(us):
+        ones = np.zeros((u.size, len(us)))
+        ones[:, j] = 1.0
+        blocks.append(np.column_stack([model.design_matrix(u), ones]))
+    design = np.vstack(blocks)
     n = model.weights_.size
-    lower = np.r_[np.zeros(n), -np.inf]
+    lower = np.r_[np.zeros(n), np.full(len(us), -np.inf)]
     ref = lsq_linear(design, np.concatenate(ys), bounds=(lower, np.inf), method="bvls").x
     np.testing.assert_allclose(model.weights_, ref[:n], atol=1e-6 * np.abs(ref[:n]).max())
-    assert model.offset_ == pytest.approx(ref[n], abs=1e-6 * np.ptp(np.concatenate(ys)))
+    span = np.ptp(np.concatenate(ys))
+    np.testing.assert_allclose(model.record_offsets_, ref[n:], atol=1e-6 * span)
+    assert model.offset_ == pytest.approx(np.mean(ref[n:]), abs=1e-6 * span)
+
+
+def test_a_run_to_run_zero_does_not_bend_the_weights() -> None:
+    """Clean-room play sum, three identification runs whose outputs sit at different zeros
+    (a tracker re-zeroed per run): one offset per record recovers the loop the runs share
+    and predicts the held-out runs better than one offset for all; without such offsets the
+    two fits agree."""
+    recs = plants.multi_record_runs("play_sum", frequencies=(0.3, 0.4, 0.5), dt=0.01,
+                                    jitter=0.0, noise=0.002, seed=5, units="mm")
+    ident = [r for r in recs if str(r["meta"]["name"]).startswith("data_1")]
+    held = [r for r in recs if str(r["meta"]["name"]).startswith("data_2")]
+    us = [np.asarray(r["u"], float) for r in ident]
+    ys = [np.asarray(r["y"], float) for r in ident]
+    span = float(np.ptp(np.concatenate(ys)))
+    shifts = np.array([-0.06, 0.0, 0.06]) * span  # shifts of mean zero: the truth is kept
+
+    def held_rmse(model) -> float:
+        e = np.concatenate([model.predict(np.asarray(r["u"], float)) - np.asarray(r["y"], float)
+                            for r in held])
+        return float(np.sqrt(np.mean(e ** 2)))
+
+    shifted = [y + s for y, s in zip(ys, shifts, strict=True)]
+    own = make_family("gamma").fit(us, shifted)
+    shared = make_family("gamma", record_offsets=False).fit(us, shifted)
+    assert held_rmse(own) < 0.8 * held_rmse(shared)
+    np.testing.assert_allclose(own.record_offsets_ - own.offset_, shifts, atol=0.01 * span)
+    clean_own = make_family("gamma").fit(us, ys)
+    clean_shared = make_family("gamma", record_offsets=False).fit(us, ys)
+    assert held_rmse(clean_own) == pytest.approx(held_rmse(clean_shared), rel=0.1)
 
 
 def test_one_record_in_a_list_is_the_same_fit(runs) -> None:
