@@ -887,4 +887,7 @@ def _main() -> None:
 
 
 if __name__ == "__main__":
+    from pipelines.cli import guard
+
+    guard("compensate")
     _main()

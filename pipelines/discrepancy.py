@@ -727,4 +727,7 @@ def _main() -> None:
 
 
 if __name__ == "__main__":
+    from pipelines.cli import guard
+
+    guard("discrepancy")
     _main()

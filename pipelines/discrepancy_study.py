@@ -462,4 +462,7 @@ def _main() -> None:
 
 
 if __name__ == "__main__":
+    from pipelines.cli import guard
+
+    guard("discrepancy_study")
     _main()

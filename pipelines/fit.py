@@ -357,4 +357,7 @@ def main(cfg: Any) -> None:
 
 
 if __name__ == "__main__":
+    from pipelines.cli import guard
+
+    guard("fit")
     main()

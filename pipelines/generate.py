@@ -246,4 +246,7 @@ def _main() -> None:
 
 
 if __name__ == "__main__":
+    from pipelines.cli import guard
+
+    guard("generate")
     _main()

@@ -269,4 +269,7 @@ def _main() -> None:
 
 
 if __name__ == "__main__":
+    from pipelines.cli import guard
+
+    guard("ingest")
     _main()

@@ -406,4 +406,7 @@ def main(cfg: Any) -> None:
 
 
 if __name__ == "__main__":
+    from pipelines.cli import guard
+
+    guard("unseen_shape")
     main()

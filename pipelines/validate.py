@@ -292,4 +292,7 @@ def main(cfg: Any) -> None:
 
 
 if __name__ == "__main__":
+    from pipelines.cli import guard
+
+    guard("validate")
     main()
