@@ -16,13 +16,14 @@ Families register themselves by name with :func:`register_family` so that
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import inspect
 import json
 import math
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -259,58 +260,16 @@ def check_inverse_reach(model: Any, *, identified_range: tuple[float, float] | N
                         desired: Any = None) -> None:
     """Refuse, before anything is driven, an inverse that cannot reach what it is asked for.
 
-    Any other model, given ``identified_range`` and ``desired``, is refused when a slow sweep of
-    that range does not reach the demanded outputs (a saturating or softening loop). For
-    weighted-play models (a Gamma family fit: ``weights_``/``thresholds_``) it raises
-    :class:`HysteresisError` naming the identification range when
-
-    * the total weight ``sum(Q)`` is <= 0: the outer slope of ``v -> Gamma(v)`` then points
-      the wrong way (or nowhere), so outputs beyond the loop are unreachable and the nearest
-      reachable one drives the plant away from the target;
-    * a threshold reaches the span of the identification input ``identified_range``: that play
-      never reversed inside the record (from rest it does not even move), so its weight is not
-      identified (it only trades against the offset and the other weights) and the inverse
-      relies on it beyond the data.
-    """
-    q = getattr(model, "weights_", None)
-    p = getattr(model, "thresholds_", None)
-    if q is None or p is None:
-        _check_swept_reach(model, identified_range, desired)
-        return
-    q = np.asarray(q, dtype=np.float64).ravel()
-    p = np.asarray(p, dtype=np.float64).ravel()
-    name = type(model).__name__
-    where = ""
-    if identified_range is not None:
-        lo, hi = (float(v) for v in identified_range)
-        where = f" (identified on inputs {lo:.4g}..{hi:.4g})"
-    total = float(q.sum())
-    wide = bool(identified_range is not None and p.size
-                and float(p.max()) >= (hi - lo) * (1 - 1e-9))
-    if total > 0 and not wide:
-        return
-    asked = ""  # only built for the message: the check itself is O(n_operators)
-    if desired is not None:
-        yd = np.asarray(desired, dtype=np.float64)
-        if yd.size:
-            asked = f"; demanded outputs {float(np.min(yd)):.4g}..{float(np.max(yd)):.4g}"
-    if not total > 0:
-        chose = (" (constraint='auto' chose free weights for this loop's shape)"
-                 if getattr(model, "constraint", None) == "auto" else "")
-        raise HysteresisError(
-            f"{name} cannot reach the demanded outputs{where}: its total weight sum(Q) = "
-            f"{total:.4g} <= 0, so its output does not rise with the input beyond the loop"
-            f"{chose}{asked}; refit with constraint='nonneg' or 'sum_to_one' for an "
-            f"invertible model, or with thresholds inside the identification range")
-    if wide:
-        raise HysteresisError(
-            f"{name} cannot be trusted to reach the demanded outputs{where}: thresholds up to "
-            f"{float(p.max()):.4g} reach the identification range's span {hi - lo:.4g}, so "
-            f"the widest plays never reversed inside it and their weights are not identified"
-            f"{asked}; refit with max_threshold < {hi - lo:.4g}")
+    A family judges its own reach (:meth:`HysteresisModel.check_reach`: Gamma by its weights
+    and thresholds, any other by a slow sweep of ``identified_range`` that must reach the
+    ``desired`` outputs); raises :class:`HysteresisError` naming the range."""
+    if isinstance(model, HysteresisModel):
+        model.check_reach(identified_range=identified_range, desired=desired)
+    else:
+        check_swept_reach(model, identified_range, desired)
 
 
-def _check_swept_reach(model: Any, identified_range: tuple[float, float] | None,
+def check_swept_reach(model: Any, identified_range: tuple[float, float] | None,
                        desired: Any) -> None:
     """Refuse demanded outputs a model cannot produce inside its identification range: a
     slow sweep low -> high -> low of that range bounds what it reaches (a saturating or
@@ -430,6 +389,18 @@ class HysteresisModel:
     def invert(self, y_desired: Any, *, state: Any = None) -> FloatArray:
         raise HysteresisError(f"family {self.family!r} has no inverse")
 
+    def check_reach(self, *, identified_range: tuple[float, float] | None = None,
+                    desired: Any = None) -> None:
+        """Raise :class:`HysteresisError` when an inverse of this model cannot reach the
+        ``desired`` outputs: by default, when a slow sweep of ``identified_range`` (low ->
+        high -> low) does not reach them (a saturating or softening loop). A family that can
+        tell from its parameters (Gamma) overrides it."""
+        check_swept_reach(self, identified_range, desired)
+
+    def clone(self: M) -> M:
+        """An unfitted copy with the same hyper-parameters (scikit-learn's ``clone``)."""
+        return type(self)(**copy.deepcopy(self.get_params()))
+
     def score(self, u: Any, y: Any) -> float:
         """Coefficient of determination R^2 of ``predict(u)`` against ``y``."""
         uu, yy = check_pair(u, y)
@@ -483,6 +454,40 @@ class StatefulModel(HysteresisModel):
         """One forward step: ``(y_k, state_k)`` from ``u_k`` and ``state_{k-1}`` (not modified)."""
         y, st = self.predict(np.array([float(u_k)]), state=state, return_state=True)
         return float(y[0]), st
+
+    def initial_state(self, u0: float = 0.0) -> Any:  # pragma: no cover - every family has one
+        """The state at rest at the input ``u0``, as the identification assumed it."""
+        raise NotImplementedError
+
+    def invert_step(self, y_k: float, state: Any = None
+                    ) -> tuple[float, Any]:  # pragma: no cover - every family has one
+        """One inverse step: the input ``u_k`` whose forward step from ``state`` gives (or
+        comes nearest to) ``y_k``, and the state after it."""
+        raise NotImplementedError
+
+
+@runtime_checkable
+class Steppable(Protocol):
+    """What an online compensation loop drives, one sample at a time: every
+    :class:`StatefulModel` family, or any object with these three methods."""
+
+    def initial_state(self, u0: float = 0.0) -> Any: ...
+
+    def step(self, u_k: float, state: Any = None) -> tuple[float, Any]: ...
+
+    def invert_step(self, y_k: float, state: Any = None) -> tuple[float, Any]: ...
+
+
+@runtime_checkable
+class LinearInParameters(Protocol):
+    """A family whose output is linear in its weights once its structure is fixed:
+    ``y = design_matrix(u) @ weights_ + offset_`` (Gamma's plays). Its fits are exact least
+    squares, and a shape-aware regression or an effect screen can work on the columns."""
+
+    weights_: Any
+    offset_: float
+
+    def design_matrix(self, u: Any, y: Any = None) -> FloatArray: ...
 
 
 def _encode(obj: Any) -> Any:

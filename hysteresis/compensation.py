@@ -38,7 +38,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import optimize
 
-from hysteresis.base import HysteresisError, as_1d, check_inverse_reach
+from hysteresis.base import HysteresisError, Steppable, as_1d, check_inverse_reach
 from hysteresis.coleman_hodgdon import ColemanHodgdonModel
 from hysteresis.gamma import GammaModel, GammaState
 from hysteresis.metrics import error_statistics
@@ -570,24 +570,18 @@ class FamilyStepper:
     ``invert_step(y, state) -> (u, state)`` (e.g. the Gamma and Bouc-Wen families)."""
 
     def __init__(self, model: Any) -> None:
-        for name in ("initial_state", "invert_step"):
-            if not callable(getattr(model, name, None)):
-                raise HysteresisError(
-                    f"{type(model).__name__} has no {name}(); it cannot be stepped online"
-                )
-        if not any(callable(getattr(model, m, None)) for m in ("step", "simulate")):
+        if not isinstance(model, Steppable):
+            missing = [m for m in ("initial_state", "step", "invert_step")
+                       if not callable(getattr(model, m, None))]
             raise HysteresisError(
-                f"{type(model).__name__} has neither step() nor simulate(); cannot step it"
-            )
+                f"{type(model).__name__} has no {'(), '.join(missing)}(); it cannot be "
+                "stepped online (a Steppable: every StatefulModel family is one)")
         self.model = model
         self.reset(0.0)
 
     def _forward(self, u: float, state: Any) -> tuple[float, Any]:
-        if callable(getattr(self.model, "step", None)):
-            y, st = self.model.step(u, state)
-            return float(y), st
-        ys, st = self.model.simulate(np.array([u]), state=state)
-        return float(ys[0]), st
+        y, st = self.model.step(u, state)
+        return float(y), st
 
     def reset(self, u0: float) -> None:
         self.state = self.model.initial_state(u0)

@@ -359,6 +359,51 @@ class GammaModel(StatefulModel):
         _, i, pos = min(screened)
         return spans[i], pos
 
+    def check_reach(self, *, identified_range: tuple[float, float] | None = None,
+                    desired: Any = None) -> None:
+        """Refuse an inverse that cannot reach the ``desired`` outputs, from the weights and
+        thresholds alone (O(n_operators)): :class:`HysteresisError` naming the range when
+
+        * the total weight ``sum(Q)`` is <= 0: the outer slope of ``v -> Gamma(v)`` then
+          points the wrong way (or nowhere), so outputs beyond the loop are unreachable and
+          the nearest reachable one drives the plant away from the target;
+        * a threshold reaches the span of the identification input ``identified_range``: that
+          play never reversed inside the record (from rest it does not even move), so its
+          weight is not identified (it only trades against the offset and the other weights)
+          and the inverse relies on it beyond the data.
+        """
+        q = np.asarray(self.weights_, dtype=np.float64).ravel()
+        p = np.asarray(self.thresholds_, dtype=np.float64).ravel()
+        name = type(self).__name__
+        where = ""
+        lo = hi = 0.0
+        if identified_range is not None:
+            lo, hi = (float(v) for v in identified_range)
+            where = f" (identified on inputs {lo:.4g}..{hi:.4g})"
+        total = float(q.sum())
+        wide = bool(identified_range is not None and p.size
+                    and float(p.max()) >= (hi - lo) * (1 - 1e-9))
+        if total > 0 and not wide:
+            return
+        asked = ""  # only built for the message
+        if desired is not None:
+            yd = np.asarray(desired, dtype=np.float64)
+            if yd.size:
+                asked = f"; demanded outputs {float(np.min(yd)):.4g}..{float(np.max(yd)):.4g}"
+        if not total > 0:
+            chose = (" (constraint='auto' chose free weights for this loop's shape)"
+                     if self.constraint == AUTO else "")
+            raise HysteresisError(
+                f"{name} cannot reach the demanded outputs{where}: its total weight sum(Q) = "
+                f"{total:.4g} <= 0, so its output does not rise with the input beyond the "
+                f"loop{chose}{asked}; refit with constraint='nonneg' or 'sum_to_one' for an "
+                f"invertible model, or with thresholds inside the identification range")
+        raise HysteresisError(
+            f"{name} cannot be trusted to reach the demanded outputs{where}: thresholds up to "
+            f"{float(p.max()):.4g} reach the identification range's span {hi - lo:.4g}, so "
+            f"the widest plays never reversed inside it and their weights are not identified"
+            f"{asked}; refit with max_threshold < {hi - lo:.4g}")
+
     @property
     def weight_constraint(self) -> str:
         """The constraint in force: the fitted one, else the setting (``auto`` screens as

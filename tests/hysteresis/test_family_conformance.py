@@ -103,3 +103,27 @@ def test_a_state_written_by_hand_is_read_and_a_wrong_one_refused(name: str) -> N
     for bad in (42, {"u": 0.0}, {"u": 0.0, "h": "x", "y": "x"}):
         with pytest.raises(HysteresisError, match="state must be"):
             model.predict(U[:5], state=bad)
+
+
+def test_capabilities_are_declared_not_probed(fitted: Any) -> None:
+    """Every family declares the online face (a Steppable: initial_state, step, invert_step)
+    and its own reach check; only a family linear in its weights claims the protocol."""
+    from hysteresis.base import HysteresisModel, LinearInParameters, Steppable
+
+    assert isinstance(fitted, Steppable)
+    for name in ("initial_state", "invert_step", "check_reach"):
+        assert getattr(type(fitted), name) is not getattr(object, name, None)
+    own_reach = type(fitted).check_reach is not HysteresisModel.check_reach
+    assert own_reach == (fitted.family == "gamma")
+    assert isinstance(fitted, LinearInParameters) == (fitted.family == "gamma")
+    if isinstance(fitted, LinearInParameters):
+        a = fitted.design_matrix(U)
+        np.testing.assert_allclose(a @ fitted.weights_ + fitted.offset_, fitted.predict(U),
+                                   rtol=0, atol=1e-9 * np.ptp(Y))
+
+
+def test_clone_is_unfitted_with_the_same_hyper_parameters(fitted: Any) -> None:
+    twin = fitted.clone()
+    assert type(twin) is type(fitted) and not twin.is_fitted
+    assert twin.get_params() == fitted.get_params()
+    assert twin.fit(U, Y).to_json() == fitted.to_json()
