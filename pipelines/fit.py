@@ -23,6 +23,7 @@ import hydra
 import pandas as pd
 
 from pipelines import cache, schemas, stages
+from pipelines.artifacts import load_models, save_models
 from pipelines.common import (
     CONF_DIR,
     Paths,
@@ -35,10 +36,9 @@ from pipelines.common import (
     to_container,
 )
 from pipelines.stages import FamilySpec, FitTask, PipelineError
-from rig_io.atomic import clean_leftovers, contained, write_text_atomic
+from rig_io.atomic import clean_leftovers
 
 log = logging.getLogger(__name__)
-MODEL_FILE_FORMAT = "tsm-fitted-model/1"
 
 
 # --------------------------------------------------------------------------------------
@@ -120,65 +120,6 @@ def family_specs(cfg: Mapping[str, Any], *, conf_dir: Path = CONF_DIR) -> list[F
 # --------------------------------------------------------------------------------------
 # model files
 # --------------------------------------------------------------------------------------
-
-
-def model_path(models_dir: Path, row: Mapping[str, Any]) -> Path:
-    config = stages.Configuration(str(row["rig"]), stages._num(row["curve_angle_deg"]),
-                                  stages._num(row["radius_mm"]))
-    return contained(models_dir, str(row["family"]),
-                     f"{config.label}__{row['fit_excitation']}.json")
-
-
-def save_models(fits: pd.DataFrame, models_dir: Path) -> list[Path]:
-    """Write every freshly fitted row (``cached`` False) as one JSON file, atomically."""
-    written = []
-    for row in fits[~fits["cached"]].to_dict("records"):
-        record = {
-            "format": MODEL_FILE_FORMAT,
-            **{k: _plain(v) for k, v in row.items() if k not in ("model_json", "cached")},
-            "model": json.loads(row["model_json"]) if isinstance(row.get("model_json"), str)
-            else None,
-        }
-        record["model_sha256"] = cache.hash_json(record["model"])
-        path = model_path(models_dir, row)
-        write_text_atomic(path, json.dumps(record, indent=1, allow_nan=True))
-        written.append(path)
-    return written
-
-
-def load_models(models_dir: Path) -> pd.DataFrame:
-    """Every model file under ``models_dir`` as a fits table (``cached`` True)."""
-    rows = []
-    for path in sorted(models_dir.glob("*/*.json")) if models_dir.is_dir() else []:
-        try:
-            record = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as exc:
-            log.warning("ignoring unreadable model file %s: %s", path, exc)
-            continue
-        if record.get("format") != MODEL_FILE_FORMAT:
-            continue
-        model = record.pop("model", None)
-        stored = record.get("model_sha256")
-        if stored is None:  # an older file, or an edit that dropped the hash: refit
-            log.warning("ignoring model file %s: it records no model_sha256, so its model "
-                        "cannot be checked (fit writes it again)", path)
-            continue
-        if stored != cache.hash_json(model):  # damaged or edited: refit
-            log.warning("ignoring model file %s: content does not match its hash", path)
-            continue
-        row = {c: record.get(c) for c in stages.FIT_COLUMNS}
-        row["model_json"] = json.dumps(model) if model is not None else None
-        row["cached"] = True
-        rows.append(row)
-    return stages.fits_frame(rows)
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, float) and value != value:
-        return None
-    if hasattr(value, "item"):
-        return value.item()
-    return value
 
 
 # --------------------------------------------------------------------------------------

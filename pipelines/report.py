@@ -28,6 +28,7 @@ import pandas as pd
 
 from hysteresis.play import play_matrix
 from pipelines import cache, schemas, stages
+from pipelines.artifacts import load_models, prediction_path, read_prediction_meta
 from pipelines.common import (
     Paths,
     dataset_hash,
@@ -37,7 +38,6 @@ from pipelines.common import (
     run_stage,
     to_container,
 )
-from pipelines.fit import load_models
 from pipelines.stages import Configuration, PipelineError
 from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
 
@@ -237,7 +237,6 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
         fits: pd.DataFrame | None = None) -> ReportResult:
     """Hydra-free core: config in, :class:`ReportResult` out; writes under reports/."""
     from pipelines import plots
-    from pipelines.validate import prediction_path, read_prediction_meta
 
     start = time.perf_counter()
     cfg = schemas.with_defaults(schemas.ReportConfig, cfg)
@@ -385,7 +384,6 @@ def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fi
                      units: tuple[str, str] = ("mm", "mm")) -> Path | None:
     """Seed 001 Fig. 4.12 for the exemplary configuration's Gamma model."""
     from pipelines import plots
-    from pipelines.validate import prediction_path
 
     rows = fits[(fits["family"] == "gamma") & fits["model_json"].notna()
                 & (fits.apply(lambda r: _config_of(r).label == config.label, axis=1))]

@@ -209,7 +209,7 @@ def not_applicable(dataset: pd.DataFrame) -> str | None:
 def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
         fits: pd.DataFrame | None = None) -> UnseenShapeResult:
     """Hydra-free core: config in, :class:`UnseenShapeResult` out; writes under reports/."""
-    from pipelines.fit import load_models
+    from pipelines.artifacts import load_models
 
     start = time.perf_counter()
     cfg = schemas.with_defaults(schemas.UnseenShapeConfig, cfg)

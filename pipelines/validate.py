@@ -22,9 +22,14 @@ from typing import Any
 import hydra
 import pandas as pd
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from pipelines import cache, schemas, stages
+from pipelines.artifacts import (
+    load_models,
+    prediction_path,
+    read_prediction_meta,
+    write_predictions,
+)
 from pipelines.common import (
     Paths,
     dataset_hash,
@@ -35,47 +40,10 @@ from pipelines.common import (
     run_stage,
     to_container,
 )
-from pipelines.fit import load_models
 from pipelines.stages import Configuration, RunSignal
-from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
+from rig_io.atomic import atomic_path, clean_leftovers, write_text_atomic
 
 log = logging.getLogger(__name__)
-META_KEY = b"tsm_validate"
-
-
-def prediction_path(predictions_dir: Path, config: Configuration) -> Path:
-    return contained(predictions_dir, f"{config.label}.parquet")
-
-
-def read_prediction_meta(path: Path) -> dict[str, Any] | None:
-    """The cache record stored in a predictions file's parquet metadata; None when absent
-    or when the file's bytes no longer have the SHA-256 recorded beside it (damaged pages
-    under an intact footer would otherwise pass for up to date)."""
-    if not path.exists():
-        return None
-    if not cache.digest_matches(path):
-        log.warning("predictions file %s does not match its recorded SHA-256 (damaged, edited "
-                    "or written before hashes were recorded): not reused; validate rewrites it",
-                    path)
-        return None
-    try:
-        meta = pq.read_schema(path).metadata or {}
-    except (OSError, pa.ArrowException):
-        return None
-    raw = meta.get(META_KEY)
-    return json.loads(raw) if raw else None
-
-
-def write_predictions(path: Path, preds: pd.DataFrame, record: Mapping[str, Any]) -> None:
-    """Predictions as parquet with the cache record (key, metrics, errors) in its metadata."""
-    table = pa.Table.from_pandas(preds, preserve_index=False)
-    meta = dict(table.schema.metadata or {})
-    meta[META_KEY] = json.dumps(record, allow_nan=True).encode()
-    table = table.replace_schema_metadata(meta)
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd")
-        digest = cache.sha256_file(tmp)
-    cache.write_digest(path, digest)
 
 
 def validate_configuration(
@@ -240,7 +208,6 @@ def write_metrics(metrics: pd.DataFrame, paths: Paths) -> None:
 
 def write_table(table: pd.DataFrame, stem: Path) -> None:
     """``<stem>.parquet`` and ``<stem>.csv``, atomically, only when the content changed."""
-    from pipelines import cache
 
     parquet, csv = stem.with_suffix(".parquet"), stem.with_suffix(".csv")
     new_hash = cache.hash_frame(table)

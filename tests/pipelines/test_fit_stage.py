@@ -11,8 +11,8 @@ import pandas as pd
 import pytest
 
 from hysteresis.base import HysteresisModel
+from pipelines import artifacts, stages
 from pipelines import fit as fit_stage
-from pipelines import stages
 from pipelines.stages import FamilySpec, PipelineError
 from tests.pipelines.pipeline_data import make_dataset, stage_cfg, write_dataset
 
@@ -110,8 +110,8 @@ def test_a_failing_fit_is_recorded_not_raised(tmp_path: Path) -> None:
     row = fits.set_index("family").loc["broken"]
     assert row["error"] == "ValueError: cannot identify" and pd.isna(row["model_json"])
     assert pd.isna(fits.set_index("family").loc["linear", "error"])
-    paths = fit_stage.save_models(fits, tmp_path / "models")
-    loaded = fit_stage.load_models(tmp_path / "models")
+    paths = artifacts.save_models(fits, tmp_path / "models")
+    loaded = artifacts.load_models(tmp_path / "models")
     assert len(paths) == 2 and set(loaded["family"]) == {"linear", "broken"}
     assert loaded.set_index("family").loc["broken", "error"] == "ValueError: cannot identify"
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from pipelines import artifacts
 from pipelines import fit as fit_stage
 from pipelines import validate as validate_stage
 from pipelines.generate import GenerateError, campaign_specs, run_generate
@@ -68,7 +69,7 @@ def test_a_rig_name_with_dotdot_never_makes_fit_or_validate_write_outside_root(
     with pytest.raises(RigIOError, match="unsafe path component '../x_phi015_r030"):
         fit_stage.run(cfg, dataset=data)
     with pytest.raises(RigIOError, match="unsafe path component"):
-        validate_stage.prediction_path(root, _config("../x"))
+        artifacts.prediction_path(root, _config("../x"))
     assert all(root in p.parents for p in _files(tmp_path))
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from pipelines import cache, tracking
+from pipelines import artifacts, cache, tracking
 from pipelines import fit as fit_stage
 from pipelines import report as report_stage
 from pipelines import validate as validate_stage
@@ -73,13 +73,13 @@ def test_a_predictions_file_with_damaged_pages_is_not_reused_by_validate_or_repo
             "formats": ["md"]}
     drawn = report_stage.run(rcfg)
     assert not drawn.cached and LABEL in drawn.config_plots
-    pred = validate_stage.prediction_path(tmp_path / "data/interim/predictions",
+    pred = artifacts.prediction_path(tmp_path / "data/interim/predictions",
                                           Configuration("tsm-bench", 90.0, 30.0))
     whole = pred.read_bytes()
     _damage_pages(pred)
     # the footer still reads: without the hash of the bytes this file passes for up to date
-    assert validate_stage.pq.read_schema(pred).metadata is not None
-    assert validate_stage.read_prediction_meta(pred) is None
+    assert artifacts.pq.read_schema(pred).metadata is not None
+    assert artifacts.read_prediction_meta(pred) is None
 
     # the report does not draw from it (and is not "up to date" on it)
     damaged = report_stage.run(rcfg)
@@ -88,13 +88,13 @@ def test_a_predictions_file_with_damaged_pages_is_not_reused_by_validate_or_repo
     # validate recomputes it: the same bytes as before the damage, the same metrics
     again, _ = validate_stage.run(cfg, dataset=data)
     assert pred.read_bytes() == whole
-    assert validate_stage.read_prediction_meta(pred) is not None
+    assert artifacts.read_prediction_meta(pred) is not None
     assert again.equals(metrics)
     assert LABEL in report_stage.run(rcfg).config_plots
 
     # a predictions file without a recorded hash (older layout) is recomputed too
     cache.digest_path(pred).unlink()
-    assert validate_stage.read_prediction_meta(pred) is None
+    assert artifacts.read_prediction_meta(pred) is None
     validate_stage.run(cfg, dataset=data)
     assert cache.digest_matches(pred)
 
