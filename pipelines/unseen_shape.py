@@ -394,6 +394,11 @@ def main_cfg(cfg: Any) -> UnseenShapeResult:
                                                  if k != "tracking"}),
                         tags={"dataset_hash": dataset_hash(paths.processed)})
             log_result(tracker, stage.parent_id, result)
+            if paths.processed.is_dir():  # the study reads every run of the dataset
+                from pipelines import lineage
+
+                lineage.log_input(tracker, [stage.parent_id], lineage.processed_input(
+                    paths.processed, context="evaluation"))
             hydra_dir = hydra_output_dir()
             if hydra_dir is not None:
                 tracker.log_artifact(stage.parent_id, hydra_dir / ".hydra", ".hydra")
