@@ -64,8 +64,8 @@ def pipeline_diagram(path: Path) -> Path:
         ax.text(x, y + 2.0, label, ha="center", va="center", fontsize=9, weight="bold")
         ax.text(x, y - 1.6, detail, ha="center", va="center", fontsize=6.5, color="#333333")
     for a, b in _ARROWS:
-        xa, ya = _BOXES[a][:2]
-        xb, yb = _BOXES[b][:2]
+        xa, ya = float(_BOXES[a][0]), float(_BOXES[a][1])
+        xb, yb = float(_BOXES[b][0]), float(_BOXES[b][1])
         if ya == yb:
             start = (xa + w / 2 + 0.5, ya) if xb > xa else (xa - w / 2 - 0.5, ya)
             end = (xb - w / 2 - 0.5, yb) if xb > xa else (xb + w / 2 + 0.5, yb)

@@ -441,8 +441,9 @@ def _identification_input(processed: Path | None, run_ids: str) -> np.ndarray | 
         file = Path(processed) / "samples" / f"{rid.strip()}.parquet"
         if rid.strip() and file.is_file():
             try:
-                return pd.read_parquet(file, columns=["input"])["input"].to_numpy(
+                u: np.ndarray = pd.read_parquet(file, columns=["input"])["input"].to_numpy(
                     dtype=np.float64)
+                return u
             except (OSError, KeyError, ValueError):
                 return None
     return None
