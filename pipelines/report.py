@@ -515,7 +515,8 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
     doc.h(2, f"Exemplary configuration {exemplary.label}")
     for fig in config_plots.get(exemplary.label, []):
         if fig != elementary:
-            doc.img(fig, f"Measured vs model, time series and loops ({exemplary.label})")
+            doc.img(fig, f"Measured vs the best family, every family's residual, and the loop "
+                            f"({exemplary.label})")
     if elementary is not None:
         doc.img(elementary, "Weighted elementary operators of Gamma (seed 001 Fig. 4.12)")
     doc.h(2, "Every configuration")
