@@ -81,5 +81,5 @@ def test_every_paper_reference_in_the_docs_has_a_glossary_entry() -> None:
     assert not missing, f"paper references without a docs/glossary.md row: {missing}"
 
 
-def test_the_readme_and_the_docs_link_the_glossary() -> None:
+def test_the_readme_links_the_glossary() -> None:
     assert "docs/glossary.md" in (REPO / "README.md").read_text(encoding="utf-8")
