@@ -633,13 +633,15 @@ def main_cfg(cfg: Any) -> ReportResult:
     """What ``python -m pipelines.report`` does with its composed config (also MLflow)."""
     from pipelines import tracking
 
+    started = time.time()  # its own parent run spans the work, not only the logging
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
     result = run(plain)
     tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
                                                              root=paths.root))
     if tracker.enabled:
-        with tracking.StageRun(tracker, "report", sweep_dir=hydra_sweep_dir()) as stage_run:
+        with tracking.StageRun(tracker, "report", sweep_dir=hydra_sweep_dir(),
+                                start_time=started) as stage_run:
             assert stage_run.parent_id is not None
             log_report(tracker, stage_run.parent_id, result)
             hydra_dir = hydra_output_dir()

@@ -381,13 +381,15 @@ def main_cfg(cfg: Any) -> UnseenShapeResult:
     """What ``python -m pipelines.unseen_shape`` does with its composed config (also MLflow)."""
     from pipelines import tracking
 
+    started = time.time()  # its own parent run spans the work, not only the logging
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
     result = run(plain)
     tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
                                                              root=paths.root))
     if tracker.enabled:
-        with tracking.StageRun(tracker, "unseen_shape", sweep_dir=hydra_sweep_dir()) as stage:
+        with tracking.StageRun(tracker, "unseen_shape", sweep_dir=hydra_sweep_dir(),
+                                start_time=started) as stage:
             assert stage.parent_id is not None
             tracker.log(stage.parent_id,
                         params=tracking.flatten({k: v for k, v in plain.items()
