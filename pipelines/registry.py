@@ -123,6 +123,8 @@ class HysteresisPyfunc(PythonModel):
         return predict_frame(self.model, pd.DataFrame(model_input))
 
 
+#: MLflow's switch for its artifact download progress bar.
+BAR = "MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR"
 #: The models-from-code file MLflow runs to load the pyfunc (``set_model``).
 MODEL_CODE = Path(__file__).with_name("pyfunc_model.py")
 
@@ -165,18 +167,22 @@ def _store(uri: str) -> Any:
 
     from mlflow.tracking._tracking_service import utils
 
-    before, env = utils._tracking_uri, os.environ.get("MLFLOW_TRACKING_URI")
+    keys = ("MLFLOW_TRACKING_URI", BAR)
+    before, env = utils._tracking_uri, {k: os.environ.get(k) for k in keys}
     mlflow.set_tracking_uri(uri)
+    # 24 models each validating its input example would print 24 download bars in the log
+    os.environ[BAR] = "false"
     try:
         yield
     finally:
         if before is not None:
             mlflow.set_tracking_uri(before)
         utils._tracking_uri = before
-        if env is None:
-            os.environ.pop("MLFLOW_TRACKING_URI", None)
-        else:
-            os.environ["MLFLOW_TRACKING_URI"] = env
+        for key, value in env.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
 
 
 def log_pyfunc(tracker: Any, run_id: str, model_json: str, *, name: str,
