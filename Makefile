@@ -18,7 +18,8 @@ REPORT ?= data/reports/discrepancy.json
 
 .PHONY: help venv data generate ingest fit validate report pipeline test test-fast bench crash-test ui \
         compensate discrepancy discrepancy-study foreign-example lint typecheck clean clean-data \
-        venv-team chromium postgresql cluster-check ui-check team-test bench-cluster
+        venv-team chromium postgresql cluster-check ui-check team-test bench-cluster \
+        docs-figures lineage-check report-check
 
 help:
 	@echo "make pipeline    generate -> ingest -> fit -> validate -> report (virtual rig, local MLflow)"
@@ -32,6 +33,9 @@ help:
 	@echo "make pipeline ARGS=\"importer=<mapping> source=<folder>\"  your own logs (docs/foreign-data.md)"
 	@echo "make foreign-example  a degree-scale bending joint, one run per shape: pipeline + discrepancy"
 	@echo "make discrepancy-study  detection limits and two-effect cases of the discrepancy workflow, checked (4-9 min)"
+	@echo "make docs-figures  redraw the README's pictures (docs/img/)"
+	@echo "make lineage-check  share of the store's runs that log their input dataset (>= 95 %)"
+	@echo "make report-check  report.html in headless chromium: headline, units, no raw Markdown"
 
 $(STAMP): requirements.lock pyproject.toml
 	test -x $(PY) || $(PYTHON_BOOT) -m venv $(VENV)
@@ -99,6 +103,14 @@ foreign-example: $(STAMP)
 discrepancy-study: $(STAMP)
 	$(PY) -m pipelines.discrepancy_study $(ARGS)
 
+# the README's pictures, drawn from the project's own code (small, deterministic, committed)
+docs-figures: $(STAMP)
+	$(PY) -m pipelines.docs_figures --out docs/img
+
+# share of the local store's runs that log their input dataset; exits 1 below 95 %
+lineage-check: $(STAMP)
+	$(PY) -m pipelines.lineage --store sqlite:///$(CURDIR)/mlflow.db $(ARGS)
+
 lint: $(STAMP)
 	$(VENV)/bin/ruff check hysteresis rig_io pipelines tests bench
 
@@ -137,6 +149,12 @@ postgresql:
 ui-check: $(TEAM_STAMP) chromium
 	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
 	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/team/test_ui_browser.py
+
+# report.html of a small pipeline in headless chromium: headline, units in every table header,
+# thumbnails, no raw Markdown (a part of ui-check)
+report-check: $(TEAM_STAMP) chromium
+	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
+	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/team/test_ui_browser.py -k report
 
 # The tests that need the team extras: the UI check above and tracking=server against a
 # throwaway PostgreSQL + MLflow server (tests/team/test_tracking_server.py). CI runs it.

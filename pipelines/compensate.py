@@ -855,15 +855,25 @@ def run(cfg: Mapping[str, Any], *, backend: RigBackend | None = None) -> dict[st
 
 def _track(cfg: Mapping[str, Any], tables: Mapping[str, pd.DataFrame],
            metrics: Mapping[str, float], art: Artifacts) -> None:
+    from pipelines import lineage
     from pipelines.tracking import StageRun, flatten, stage_tracker
 
     tracker = stage_tracker(cfg)
     if tracker is None:
         return
+    exps = {k: cfg[k] for k in ("seed001", "seed002", "seed000") if k in cfg}
+    # what the experiments measured on the plant (closed loops, identification records)
+    data = lineage.measured_input(
+        f"compensation:{'+'.join(exps)}", tables, source="rig_io.virtual (RigBackend)",
+        context="evaluation", tags={"experiments": ",".join(exps)})
     with StageRun(tracker, "compensate") as stage:
-        with tracker.run("compensate", parent_id=stage.parent_id,
+        with tracker.run(f"compensation {' '.join(exps)}", parent_id=stage.parent_id,
+                         note="The papers' compensation experiments (" + ", ".join(exps)
+                              + ") with our models beside the papers' schemes on the same "
+                              "plant; tables, plots and the report section are artifacts.",
                          tags={"stage": "compensate", "kind": "experiment"}) as run_id:
-            exps = {k: cfg[k] for k in ("seed001", "seed002", "seed000") if k in cfg}
+            lineage.log_input(tracker, [run_id, stage.parent_id if stage.owns else None],
+                              data)
             tracker.log(run_id, params=flatten(exps),
                         metrics={k: v for k, v in metrics.items() if math.isfinite(v)})
             for name, frame in tables.items():

@@ -584,7 +584,7 @@ def run(cfg: Mapping[str, Any]) -> dict[str, Any]:
     report["plots"] = [str(p) for p in plots]
     report["elapsed_s"] = round(time.perf_counter() - t0, 3)
     write_text_atomic(report_path, json.dumps(report, indent=1, default=_json_default) + "\n")
-    _track(cfg, report, report_path, plots)
+    _track(cfg, report, report_path, plots, meta)
     log.info("%s", report["headline"])
     return report
 
@@ -672,16 +672,22 @@ def _json_default(obj: Any) -> Any:
 
 
 def _track(cfg: Mapping[str, Any], report: Mapping[str, Any], report_path: Path,
-           plots: list[Path]) -> None:
+           plots: list[Path], runs: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+    from pipelines import lineage
     from pipelines.tracking import StageRun, stage_tracker
 
     tracker = stage_tracker(cfg)
     if tracker is None:
         return
+    # the measured runs it analysed: on the analysis run and on its stage's own parent
+    data = lineage.source_input(str(cfg["source"]), runs or {}, context="analysis")
     with StageRun(tracker, "discrepancy") as stage:
-        with tracker.run("discrepancy", parent_id=stage.parent_id,
+        with tracker.run(f"discrepancy {Path(str(report['source'])).name}",
+                         parent_id=stage.parent_id, note=str(report["headline"]),
                          tags={"stage": "discrepancy", "kind": "analysis",
                                "verdict": report["verdict"]}) as run_id:
+            lineage.log_input(tracker, [run_id, stage.parent_id if stage.owns else None],
+                              data)
             s = report["summary"]
             metrics = {
                 "before.rmse": s["rmse_before"], "after.rmse": s["rmse_after"],

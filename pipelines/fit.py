@@ -28,6 +28,7 @@ from pipelines.common import (
     CONF_DIR,
     Paths,
     dataset_hash,
+    dataset_units,
     hydra_output_dir,
     hydra_sweep_dir,
     identification_plan,
@@ -261,6 +262,7 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
     """What ``python -m pipelines.fit`` does with its composed config (also MLflow)."""
     from pipelines import tracking
 
+    started = time.time()  # its own parent run spans the work, not only the logging
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
     settings = tracking.settings_from_config(plain["tracking"], root=paths.root)
@@ -270,7 +272,8 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
     dataset = read_processed(paths.processed)
     fits = run(plain, dataset=dataset)
     if tracker.enabled:
-        with tracking.StageRun(tracker, "fit", sweep_dir=hydra_sweep_dir()) as stage_run:
+        with tracking.StageRun(tracker, "fit", sweep_dir=hydra_sweep_dir(),
+                                start_time=started) as stage_run:
             assert stage_run.parent_id is not None
             base = tracking.flatten({k: v for k, v in plain.items()
                                      if k not in ("family", "family_overrides", "tracking")})
@@ -284,6 +287,7 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
                 metrics=fit_metrics(fits, plan.dataset, plain), base_params=base,
                 tags={"dataset_hash": dataset_hash(paths.processed)},
                 hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, stage="fit",
+                units=dataset_units(paths.processed),
             )
             from pipelines import lineage
 

@@ -220,3 +220,118 @@ def log_stage_inputs(tracker: Any, run_id: str, metrics: pd.DataFrame, *, proces
     for i in range(0, len(inputs), 500):
         retry(tracker.client.log_inputs, run_id, datasets=inputs[i:i + 500])
     return len(inputs)
+
+
+# --------------------------------------------------------------------------------------
+# whole-dataset inputs: the pipeline's parent, the discrepancy and compensation runs
+# --------------------------------------------------------------------------------------
+
+
+def processed_input(processed: Path, *, context: str) -> Any:
+    """The whole processed dataset at ``processed`` as one ``DatasetInput`` (the pipeline's
+    parent run: the unseen-shape study and the report read every run of it). Digest: the
+    dataset's content hash; input tags: the run count and the raw folders."""
+    from mlflow.entities import Dataset, DatasetInput, InputTag
+
+    from pipelines.common import dataset_hash
+    from rig_io.dataset import read_runs
+
+    processed = Path(processed)
+    index = read_runs(processed) if processed.is_dir() else {}
+    sources = sorted({str(Path(str(m.get("source_path"))).parent) for m in index.values()
+                      if m.get("source_path")})
+    profile = {"runs": len(index), "processed": str(processed), "raw_folders": sources[:20]}
+    entity = Dataset(name=f"{processed.name}:all runs", digest=dataset_hash(processed),
+                     source_type="local", source=json.dumps({"uri": str(processed)}),
+                     profile=json.dumps(profile))
+    return DatasetInput(dataset=entity, tags=[InputTag(CONTEXT_TAG, context),
+                                              InputTag("runs", str(len(index))),
+                                              InputTag("raw_folders", _fit(",".join(sources)))])
+
+
+def source_input(source: str | Path, runs: Mapping[str, Mapping[str, Any]], *,
+                 context: str) -> Any:
+    """The raw runs a stage read straight from ``source`` (the discrepancy workflow ingests
+    its source itself): ``runs`` is ingest's run index (``runs.json``) of that source.
+    Digest: a hash over (run id, raw source hash) per run, so re-recorded runs differ."""
+    from mlflow.entities import Dataset, DatasetInput, InputTag
+
+    src = Path(source).resolve()
+    ids = sorted(runs)
+    digest = cache.hash_json([[r, str(runs[r].get("source_hash") or "unknown")] for r in ids])
+    kinds = sorted({_excitation_name(runs[r].get("excitation")) for r in ids})
+    profile = {"runs": len(ids), "excitations": kinds, "source": str(src)}
+    entity = Dataset(name=f"{src.name}:{len(ids)} runs", digest=digest, source_type="local",
+                     source=json.dumps({"uri": str(src)}), profile=json.dumps(profile))
+    tags = [InputTag(CONTEXT_TAG, context), InputTag("run_ids", _fit(",".join(ids))),
+            InputTag("raw_hashes", _fit(",".join(
+                f"{r}={str(runs[r].get('source_hash') or 'unknown')[:16]}" for r in ids)))]
+    return DatasetInput(dataset=entity, tags=tags)
+
+
+def _excitation_name(value: Any) -> str:
+    if isinstance(value, Mapping):
+        return str(value.get("name") or value.get("kind") or "?")
+    return str(value or "?")
+
+
+def measured_input(name: str, tables: Mapping[str, pd.DataFrame], *, source: str,
+                   context: str, tags: Mapping[str, str] | None = None) -> Any:
+    """Data a stage measured itself (the compensation experiments record their closed loops
+    on the rig behind ``source``): one ``DatasetInput`` whose digest hashes the recorded
+    tables, so a run with other measurements shows another digest."""
+    from mlflow.entities import Dataset, DatasetInput, InputTag
+
+    digest = cache.hash_json({k: cache.hash_frame(v.reset_index(drop=True))
+                              for k, v in sorted(tables.items())})
+    profile = {"tables": {k: len(v) for k, v in sorted(tables.items())}}
+    entity = Dataset(name=name, digest=digest, source_type="code",
+                     source=json.dumps({"uri": source}), profile=json.dumps(profile))
+    return DatasetInput(dataset=entity, tags=[InputTag(CONTEXT_TAG, context),
+                                              *(InputTag(k, _fit(str(v)))
+                                                for k, v in (tags or {}).items())])
+
+
+def log_input(tracker: Any, run_ids: Iterable[str | None], dataset: Any) -> None:
+    """Log one ``DatasetInput`` on each of ``run_ids`` (what ``mlflow.log_input`` writes)."""
+    from pipelines.tracking import retry
+
+    for run_id in run_ids:
+        if run_id:
+            retry(tracker.client.log_inputs, run_id, datasets=[dataset])
+
+
+def input_coverage(client: Any, experiment_ids: Sequence[str]) -> tuple[int, int]:
+    """(runs that log at least one input dataset, all runs) in ``experiment_ids``."""
+    from pipelines.tracking import retry
+
+    runs = list(retry(client.search_runs, list(experiment_ids), max_results=50000))
+    with_inputs = sum(1 for r in runs if r.inputs is not None and r.inputs.dataset_inputs)
+    return with_inputs, len(runs)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m pipelines.lineage [--store <uri>] [--experiment tsm-hysteresis] [--min 95]``:
+    how many runs of the experiment log their input dataset; exit 1 below ``--min`` %."""
+    import argparse
+
+    from mlflow import MlflowClient
+
+    ap = argparse.ArgumentParser(prog="python -m pipelines.lineage", description=main.__doc__)
+    ap.add_argument("--store", default="sqlite:///mlflow.db", help="tracking URI")
+    ap.add_argument("--experiment", default="tsm-hysteresis")
+    ap.add_argument("--min", type=float, default=95.0, help="lowest acceptable share in %%")
+    args = ap.parse_args(argv)
+    client = MlflowClient(tracking_uri=args.store)
+    exp = client.get_experiment_by_name(args.experiment)
+    if exp is None:
+        print(f"no experiment {args.experiment!r} in {args.store}")
+        return 1
+    n, total = input_coverage(client, [exp.experiment_id])
+    share = 100.0 * n / total if total else 0.0
+    print(f"{n} of {total} runs log an input dataset ({share:.1f} %)")
+    return 0 if share >= args.min else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,7 +1,7 @@
 """The report's figures (matplotlib, Agg backend): one function per figure, file out.
 
-* :func:`configuration_figure` - measured vs model time series and input-output loops of
-  every family overlaid, one row per evaluation excitation (seed 001 Fig. 4.10-4.21);
+* :func:`configuration_figure` - per evaluation excitation: measured vs the best family,
+  every family's residual, and the best family's input-output loop (seed 001 Fig. 4.10-4.21);
 * :func:`elementary_figure` - the weighted elementary operators q_i gamma_i of Gamma
   (seed 001 Fig. 4.12);
 * :func:`shape_heatmaps` - an error metric over curve angle x radius, one panel per family;
@@ -48,10 +48,30 @@ def _thin(n: int, max_points: int) -> slice:
     return slice(None, None, max(1, int(np.ceil(n / max_points))))
 
 
+def _rmse(f: pd.DataFrame) -> float:
+    e = f["predicted"].to_numpy(dtype=float) - f["output"].to_numpy(dtype=float)
+    return float(np.sqrt(np.nanmean(e * e))) if e.size else float("nan")
+
+
+def best_family(preds: pd.DataFrame, fit_excitation: str) -> str | None:
+    """The family with the lowest RMSE over the held-out excitations of ``preds`` (over the
+    identification record when nothing is held out)."""
+    held = preds[np.asarray(preds["eval_excitation"] != fit_excitation, dtype=bool)]
+    use = held if len(held) else preds
+    if use.empty:
+        return None
+    scores = {str(f): _rmse(g) for f, g in use.groupby("family", observed=True)}
+    scores = {f: v for f, v in scores.items() if v == v}
+    return min(scores, key=lambda f: (scores[f], f)) if scores else None
+
+
 def configuration_figure(preds: pd.DataFrame, path: Path, *, title: str,
                          fit_excitation: str, dpi: int = 72, max_points: int = 1500,
                          units: tuple[str, str] = ("mm", "mm")) -> Path:
-    """Time series (left) and loops (right) of the measured output and every family;
+    """One row per evaluation excitation: the measured output with the best family's
+    prediction (left), every family's residual (middle, legend with its RMSE) and the loop
+    of the measured output and the best family (right). Drawing all five families over each
+    other hid them; the residuals tell them apart at the scale of their errors.
     ``units``: the input's and the output's unit (axis labels)."""
     u_unit, y_unit = units
     # Group once (no per-filter string conversion of 100k categorical rows).
@@ -62,40 +82,56 @@ def configuration_figure(preds: pd.DataFrame, path: Path, *, title: str,
                    key=lambda k: (k != fit_excitation, EXCITATION_ORDER.index(k)
                                   if k in EXCITATION_ORDER else 99, k))
     families = sorted({f for _, f, _ in groups})
-    fig, axes = plt.subplots(max(len(kinds), 1), 2, figsize=(11, 2.6 * max(len(kinds), 1)),
-                             squeeze=False, gridspec_kw={"width_ratios": [2.2, 1]})
+    best = best_family(preds, fit_excitation) or (families[0] if families else "")
+    # the worst first, so the better families' residuals are drawn on top
+    order = sorted(families, key=lambda f: -_rmse(preds[preds["family"] == f]))
+    rows = max(len(kinds), 1)
+    fig, axes = plt.subplots(rows, 3, figsize=(13, 2.5 * rows), squeeze=False,
+                             gridspec_kw={"width_ratios": [2.0, 2.0, 1.0]})
     for row, kind in enumerate(kinds):
         first_run = min(r for k, _, r in groups if k == kind)
-        ax_t, ax_l = axes[row]
-        base = groups[(kind, families[0], first_run)] if (kind, families[0], first_run) \
-            in groups else next(g for (k, _, r), g in groups.items()
-                                if k == kind and r == first_run)
+        ax_t, ax_r, ax_l = axes[row]
+        base = groups.get((kind, best, first_run))
+        if base is None:
+            base = next(g for (k, _, r), g in groups.items() if k == kind and r == first_run)
         s = _thin(len(base), max_points)
         t = base["t_s"].to_numpy()[s]
-        ax_t.plot(t, base["output"].to_numpy()[s], color="k", lw=1.4, label="measured")
-        ax_l.plot(base["input"].to_numpy()[s], base["output"].to_numpy()[s], color="k", lw=1.2)
-        for i, fam in enumerate(families):
+        ax_t.plot(t, base["output"].to_numpy()[s], color="k", lw=1.3, label="measured")
+        ax_l.plot(base["input"].to_numpy()[s], base["output"].to_numpy()[s], color="k", lw=1.1,
+                  label="measured")
+        if (kind, best, first_run) in groups:
+            ax_t.plot(t, base["predicted"].to_numpy()[s], color=_color(best, 0), lw=0.9,
+                      label=f"{best} (best)")
+            ax_l.plot(base["input"].to_numpy()[s], base["predicted"].to_numpy()[s], lw=0.9,
+                      color=_color(best, 0), label=best)
+        for i, fam in enumerate(order):
             f = groups.get((kind, fam, first_run))
             if f is None:
                 continue
             s2 = _thin(len(f), max_points)
-            ax_t.plot(f["t_s"].to_numpy()[s2], f["predicted"].to_numpy()[s2], lw=0.9,
-                      color=_color(fam, i), label=fam)
-            ax_l.plot(f["input"].to_numpy()[s2], f["predicted"].to_numpy()[s2], lw=0.8,
-                      color=_color(fam, i))
+            resid = (f["predicted"].to_numpy() - f["output"].to_numpy())[s2]
+            ax_r.plot(f["t_s"].to_numpy()[s2], resid, color=_color(fam, i),
+                      lw=1.1 if fam == best else 0.6, alpha=1.0 if fam == best else 0.75,
+                      label=f"{fam} {_rmse(f):.2g}")
+        ax_r.axhline(0.0, color="k", lw=0.5)
         split = "identification" if kind == fit_excitation else "held-out"
         ax_t.set_title(f"{kind} ({split})", fontsize=9, loc="left")
+        ax_r.set_title(f"residual, RMSE [{y_unit}] in the legend", fontsize=8, loc="left")
         ax_t.set_ylabel(f"output [{y_unit}]")
-        ax_l.set_xlabel(f"input [{u_unit}]")
+        ax_r.set_ylabel(f"residual [{y_unit}]")
+        ax_l.set_xlabel(f"input [{u_unit}]", fontsize=8)
         ax_l.set_ylabel(f"output [{y_unit}]")
-        ax_t.grid(alpha=0.3)
-        ax_l.grid(alpha=0.3)
+        ax_r.legend(fontsize=6, loc="upper right", ncol=1, framealpha=0.7)
+        for ax in (ax_t, ax_r, ax_l):
+            ax.grid(alpha=0.3)
+            ax.tick_params(labelsize=7)
     axes[-1][0].set_xlabel("t [s]")
-    axes[0][0].legend(fontsize=7, ncol=min(len(families) + 1, 6), loc="upper right")
-    fig.suptitle(title, fontsize=11)
+    axes[-1][1].set_xlabel("t [s]")
+    axes[0][0].legend(fontsize=7, loc="upper right")
+    fig.suptitle(f"{title}: best family {best}", fontsize=11)
     # fixed margins: tight_layout costs an extra text-layout pass per figure (x 24 figures)
-    fig.subplots_adjust(left=0.07, right=0.985, top=0.93, bottom=0.07, hspace=0.38,
-                        wspace=0.2)
+    fig.subplots_adjust(left=0.06, right=0.99, top=0.92, bottom=0.07, hspace=0.45,
+                        wspace=0.22)
     return _save(fig, path, dpi)
 
 

@@ -3,9 +3,11 @@
 After ``make pipeline`` every configuration (rig x curve angle x radius) has one registered
 model, ``<prefix>.<configuration label>`` (e.g. ``tsm.tsm-bench_phi090_r030``), whose alias
 ``champion`` points at the version holding the family with the lowest held-out RMSE. Each
-version is an MLflow *pyfunc* logged into the child run of the model it wraps (so the
-registry links back to the run, its metrics and its dataset), tagged with the held-out
-metrics, the family, the model key and the processed data hash:
+version wraps an MLflow 3 *logged model* (:func:`log_pyfunc`: a pyfunc from code,
+``pipelines/pyfunc_model.py``, with a signature whose units are in its metadata and an input
+example), the output of the child run of the model it wraps (so the registry links back to
+the run, its metrics and its dataset), tagged with the family, the configuration, the
+held-out score and metrics, the model key and the processed data hash:
 
     import mlflow, pandas as pd
     model = mlflow.pyfunc.load_model("models:/tsm.tsm-bench_phi090_r030@champion")
@@ -22,12 +24,13 @@ local SQLite store and into a shared tracking server.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import importlib
 import json
 import logging
 import tempfile
-import warnings
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,8 +47,6 @@ log = logging.getLogger(__name__)
 
 ALIAS = "champion"
 DEFAULT_PREFIX = "tsm"
-#: Artifact folder of the pyfunc inside the model's child run.
-ARTIFACT_PATH = "registered_model"
 #: Held-out metrics copied onto a model version as tags (``heldout.<m>``).
 TAG_METRICS = ("rmse", "mean_abs_error", "std_error", "error_range", "sse")
 
@@ -122,26 +123,102 @@ class HysteresisPyfunc(PythonModel):
         return predict_frame(self.model, pd.DataFrame(model_input))
 
 
-def save_pyfunc(model_json: str, path: Path) -> Path:
-    """Write the pyfunc model folder (MLmodel, the model JSON, a signature) to ``path``."""
+#: MLflow's switch for its artifact download progress bar.
+BAR = "MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR"
+#: The models-from-code file MLflow runs to load the pyfunc (``set_model``).
+MODEL_CODE = Path(__file__).with_name("pyfunc_model.py")
+
+
+def model_signature() -> Any:
+    """``input`` (and the optional ``state``) in, ``output`` out; the units travel in the
+    model's metadata (:func:`signature_metadata`), since a column spec has no unit field."""
     from mlflow.models import ModelSignature
     from mlflow.types import ColSpec, Schema
 
-    with tempfile.TemporaryDirectory(prefix="tsm-pyfunc-") as tmp:
+    return ModelSignature(
+        inputs=Schema([ColSpec("double", "input"), ColSpec("string", "state", required=False)]),
+        outputs=Schema([ColSpec("double", "output")]))
+
+
+def signature_metadata(units: tuple[str, str]) -> dict[str, Any]:
+    """What each signature column means and its unit (the MLmodel file's ``metadata``)."""
+    return {"signature_units": {"input": units[0], "output": units[1], "state": "JSON"},
+            "signature_meaning": {
+                "input": "proximal (actuator) displacement, one row per sample at the rig rate",
+                "state": "optional start state in the first row (encode_state)",
+                "output": "predicted distal displacement"}}
+
+
+def input_example(u: np.ndarray | None = None, n: int = 40) -> pd.DataFrame:
+    """A short input for the model's page: ``n`` samples spread over ``u`` (the model's own
+    identification input), or a unit triangle when no data is at hand."""
+    if u is None or len(u) < 2:
+        u = np.concatenate([np.linspace(0, 1, n // 2), np.linspace(1, -1, n - n // 2)])
+    idx = np.linspace(0, len(u) - 1, min(n, len(u))).round().astype(int)
+    return pd.DataFrame({"input": np.asarray(u, dtype=np.float64)[idx]})
+
+
+@contextlib.contextmanager
+def _store(uri: str) -> Any:
+    """MLflow's fluent model logging reads the global tracking URI: point it at ``uri`` for
+    the block, then put back what was there (the variable and the environment, which
+    ``set_tracking_uri`` also writes)."""
+    import os
+
+    from mlflow.tracking._tracking_service import utils
+
+    keys = ("MLFLOW_TRACKING_URI", BAR)
+    before, env = utils._tracking_uri, {k: os.environ.get(k) for k in keys}
+    mlflow.set_tracking_uri(uri)
+    # 24 models each validating its input example would print 24 download bars in the log
+    os.environ[BAR] = "false"
+    try:
+        yield
+    finally:
+        if before is not None:
+            mlflow.set_tracking_uri(before)
+        utils._tracking_uri = before
+        for key, value in env.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+def log_pyfunc(tracker: Any, run_id: str, model_json: str, *, name: str,
+               units: tuple[str, str] = ("?", "?"), example: np.ndarray | None = None,
+               tags: Mapping[str, str] | None = None, params: Mapping[str, str] | None = None,
+               metrics: Mapping[str, float] | None = None) -> str:
+    """Log the model as an MLflow 3 *logged model* of ``run_id`` (models-from-code, a
+    signature whose units are in the metadata, an input example) and return its model id.
+
+    The logged model is the run's output (the run page and the experiment's *Models* tab
+    list it) and carries ``metrics`` (e.g. the held-out RMSE) as its own.
+    """
+    from mlflow.entities import LoggedModelOutput, Metric
+
+    from pipelines.tracking import retry
+
+    client = tracker.client
+    model = retry(client.create_logged_model, tracker.experiment_id, name=name,
+                  source_run_id=run_id, tags=dict(tags or {}), params=dict(params or {}),
+                  model_type="hysteresis")
+    with tempfile.TemporaryDirectory(prefix="tsm-pyfunc-") as tmp, \
+            _store(tracker.settings.tracking_uri):
         src = Path(tmp) / "model.json"
         src.write_text(model_json, encoding="utf-8")
-        signature = ModelSignature(
-            inputs=Schema([ColSpec("double", "input"),
-                           ColSpec("string", "state", required=False)]),
-            outputs=Schema([ColSpec("double", "output")]))
-        # Explicit requirements: inferring them would load the model in a subprocess per save.
-        # The signature documents the input; an example would only repeat it.
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message=".*input example was not provided.*")
-            mlflow.pyfunc.save_model(
-                str(path), python_model=HysteresisPyfunc(), artifacts={"model_json": str(src)},
-                signature=signature, pip_requirements=_requirements())
-    return path
+        # Explicit requirements: inferring them would load the model in a subprocess.
+        retry(mlflow.pyfunc.log_model, name=name, python_model=str(MODEL_CODE),
+              artifacts={"model_json": str(src)}, signature=model_signature(),
+              input_example=input_example(example), metadata=signature_metadata(units),
+              pip_requirements=_requirements(), model_id=model.model_id)
+    retry(client.log_outputs, run_id, [LoggedModelOutput(model.model_id, step=0)])
+    ts = int(time.time() * 1000)
+    values = [Metric(k, float(v), ts, 0, model_id=model.model_id, run_id=run_id)
+              for k, v in (metrics or {}).items() if v == v]
+    if values:
+        retry(client.log_batch, run_id, metrics=values)
+    return str(model.model_id)
 
 
 def _requirements() -> list[str]:
@@ -232,7 +309,8 @@ class Registered:
 
 def register_champions(tracker: Any, fits: pd.DataFrame, metrics: pd.DataFrame, *,
                        data_hash: str, prefix: str = DEFAULT_PREFIX, alias: str = ALIAS,
-                       fit_excitation: str | None = None) -> list[Registered]:
+                       fit_excitation: str | None = None, units: tuple[str, str] = ("?", "?"),
+                       processed: Path | None = None) -> list[Registered]:
     """Register each configuration's champion and point ``alias`` at it.
 
     The pyfunc goes into the child run already logged for that model (found by its
@@ -256,7 +334,7 @@ def register_champions(tracker: Any, fits: pd.DataFrame, metrics: pd.DataFrame, 
         # registering into this store: two pipelines at once add one version, not two.
         with key_lock(tracker.settings, name):
             done = _register_one(tracker, client, champ, name, alias=alias,
-                                 data_hash=data_hash)
+                                 data_hash=data_hash, units=units, processed=processed)
         if done is not None:
             out.append(done)
     log.info("registry: %d configurations, %d new versions", len(out),
@@ -265,7 +343,8 @@ def register_champions(tracker: Any, fits: pd.DataFrame, metrics: pd.DataFrame, 
 
 
 def _register_one(tracker: Any, client: Any, champ: Mapping[str, Any], name: str, *,
-                  alias: str, data_hash: str) -> Registered | None:
+                  alias: str, data_hash: str, units: tuple[str, str] = ("?", "?"),
+                  processed: Path | None = None) -> Registered | None:
     """Point ``alias`` of ``name`` at a version wrapping ``champ``, creating the version only
     when none wraps that model on that data (see :func:`register_champions`)."""
     from mlflow.exceptions import MlflowException
@@ -292,30 +371,88 @@ def _register_one(tracker: Any, client: Any, champ: Mapping[str, Any], name: str
     if existing:
         first = min(existing, key=lambda v: int(v.version))
         retry(client.set_registered_model_alias, name, alias, first.version)
+        _describe_champion(client, name, family, str(first.version),
+                           str((first.tags or {}).get("score", "")))
         return Registered(name, str(first.version), family, run_id, False)
-    with tempfile.TemporaryDirectory(prefix="tsm-register-") as tmp:
-        folder = save_pyfunc(str(champ["model_json"]), Path(tmp) / ARTIFACT_PATH)
-        tracker.log_artifact(run_id, folder, ARTIFACT_PATH)
+    config = name.split(".", 1)[-1]
+    score = _score_text(champ, units[1])
+    tags = {"family": family, "configuration": config, "model_key": key,
+            "dataset_hash": data_hash, "fit_excitation": str(champ["fit_excitation"]),
+            "fit_run_ids": str(champ["fit_run_ids"]),
+            "score_split": str(champ["score_split"]), "score": score,
+            "unit.input": units[0], "unit.output": units[1],
+            **{k: repr(float(v)) for k, v in champ.items()
+               if k.startswith(("heldout.", "insample.")) and v == v}}
+    model_id = log_pyfunc(
+        tracker, run_id, str(champ["model_json"]), name=f"{config}-{family}", units=units,
+        example=_identification_input(processed, str(champ["fit_run_ids"])),
+        tags={k: tags[k] for k in ("family", "configuration", "model_key", "dataset_hash",
+                                   "score")},
+        params={k: str(v) for k, v in _family_params(champ).items()},
+        metrics={k: float(v) for k, v in champ.items()
+                 if k.startswith(("heldout.", "insample.")) and v == v})
     try:
         retry(client.create_registered_model, name, tags={
             "rig": str(champ["rig"]), "curve_angle_deg": _tag(champ["curve_angle_deg"]),
             "radius_mm": _tag(champ["radius_mm"])},
-            description="Best model family of this sheath configuration (lowest "
+            description=f"The best model family of sheath configuration {config} (lowest "
                         "held-out RMSE); alias 'champion' is the current one.")
     except MlflowException as exc:
         if "RESOURCE_ALREADY_EXISTS" not in str(exc) and "already exists" not in str(exc):
             raise
-    tags = {"family": family, "model_key": key, "dataset_hash": data_hash,
-            "fit_excitation": str(champ["fit_excitation"]),
-            "fit_run_ids": str(champ["fit_run_ids"]),
-            "score_split": str(champ["score_split"]),
-            **{k: repr(float(v)) for k, v in champ.items()
-               if k.startswith(("heldout.", "insample.")) and v == v}}
-    artifact_uri = str(retry(client.get_run, run_id).info.artifact_uri)
-    version = retry(client.create_model_version, name,
-                    f"{artifact_uri.rstrip('/')}/{ARTIFACT_PATH}", run_id=run_id, tags=tags)
+    # the store resolves a models:/ source through the global tracking URI (MLflow 3.17)
+    with _store(tracker.settings.tracking_uri):
+        version = retry(client.create_model_version, name, f"models:/{model_id}",
+                        run_id=run_id, tags=tags, model_id=model_id, description=(
+                            f"{family} on {config}, identified on "
+                            f"{champ['fit_excitation']}; {score}."))
     retry(client.set_registered_model_alias, name, alias, version.version)
+    _describe_champion(client, name, family, str(version.version), score)
     return Registered(name, str(version.version), family, run_id, True)
+
+
+def _score_text(champ: Mapping[str, Any], unit: str) -> str:
+    """``held-out RMSE 0.0591 mm`` (or in-sample, when nothing held out was scored)."""
+    split = "held-out" if champ.get("score_split") == "heldout" else "in-sample"
+    return f"{split} RMSE {float(champ['score']):.3g} {unit}".rstrip()
+
+
+def _describe_champion(client: Any, name: str, family: str, version: str, score: str) -> None:
+    """The registered model's tags and description name its champion, so the registry's
+    model list shows the winning family without opening a version."""
+    from pipelines.tracking import retry
+
+    retry(client.set_registered_model_tag, name, "champion_family", family)
+    retry(client.set_registered_model_tag, name, "champion_score", score)
+    config = name.split(".", 1)[-1]
+    retry(client.update_registered_model, name, description=(
+        f"Sheath configuration {config}: champion {family} (version {version}, {score}). "
+        "The alias 'champion' always points at the family with the lowest held-out RMSE."))
+
+
+def _family_params(champ: Mapping[str, Any]) -> dict[str, Any]:
+    from pipelines.tracking import flatten
+
+    try:
+        return flatten(json.loads(str(champ.get("params_json") or "{}")))
+    except json.JSONDecodeError:
+        return {}
+
+
+def _identification_input(processed: Path | None, run_ids: str) -> np.ndarray | None:
+    """The input of the model's first identification run (for its input example)."""
+    if processed is None:
+        return None
+    for rid in run_ids.split(","):
+        file = Path(processed) / "samples" / f"{rid.strip()}.parquet"
+        if rid.strip() and file.is_file():
+            try:
+                u: np.ndarray = pd.read_parquet(file, columns=["input"])["input"].to_numpy(
+                    dtype=np.float64)
+                return u
+            except (OSError, KeyError, ValueError):
+                return None
+    return None
 
 
 def _wraps(version: Any, key: str, data_hash: str) -> bool:
@@ -379,7 +516,7 @@ def register_pipeline(tracker: Any, cfg: Mapping[str, Any], *, fits: pd.DataFram
                       metrics: pd.DataFrame | None, processed: Path) -> list[Registered]:
     """``make pipeline``'s last step: register the champions when the ``tracking.registry``
     config asks for it and this invocation fitted and validated."""
-    from pipelines.common import dataset_hash
+    from pipelines.common import dataset_hash, dataset_units
 
     reg = dict((cfg.get("tracking") or {}).get("registry") or {})
     if not tracker.enabled or not reg.get("enabled", False) or fits is None \
@@ -389,4 +526,5 @@ def register_pipeline(tracker: Any, cfg: Mapping[str, Any], *, fits: pd.DataFram
     return register_champions(
         tracker, fits, metrics, data_hash=dataset_hash(processed),
         prefix=str(reg.get("prefix", DEFAULT_PREFIX)), alias=str(reg.get("alias", ALIAS)),
-        fit_excitation=str(cfg.get("identified_excitation") or fit_excitations[0]))
+        fit_excitation=str(cfg.get("identified_excitation") or fit_excitations[0]),
+        units=dataset_units(processed), processed=processed)

@@ -74,11 +74,20 @@ class Doc:
     def p(self, text: str) -> None:
         self.blocks.append(("p", text))
 
+    def headline(self, text: str) -> None:
+        """The sentence a reader takes away, first under the title."""
+        self.blocks.append(("headline", text))
+
     def table(self, frame: pd.DataFrame, *, floatfmt: str = ".3g") -> None:
         self.blocks.append(("table", (frame, floatfmt)))
 
     def img(self, path: Path, caption: str) -> None:
         self.blocks.append(("img", (path.relative_to(self.root).as_posix(), caption)))
+
+    def thumbs(self, items: Sequence[tuple[str, Path]]) -> None:
+        """Small images, each linking to its full-size figure, with a caption."""
+        self.blocks.append(("thumbs", [(t, p.relative_to(self.root).as_posix())
+                                       for t, p in items]))
 
     def links(self, items: Sequence[tuple[str, Path]]) -> None:
         self.blocks.append(("links", [(t, p.relative_to(self.root).as_posix())
@@ -99,6 +108,8 @@ class Doc:
                 out.append(f"{'#' * data[0]} {data[1]}\n")
             elif kind == "p":
                 out.append(f"{data}\n")
+            elif kind == "headline":
+                out.append(f"**{data}**\n")
             elif kind == "table":
                 frame, fmt = data
                 cols = [str(c) for c in frame.columns]
@@ -111,6 +122,10 @@ class Doc:
                 out.append(f"![{data[1]}]({data[0]})\n\n*{data[1]}*\n")
             elif kind == "links":
                 out.append("\n".join(f"- [{t}]({p})" for t, p in data) + "\n")
+            elif kind == "thumbs":
+                out.append(" ".join(f'<a href="{p}"><img src="{p}" width="240" alt="{t}" '
+                                    f'title="{t}"></a>' for t, p in data) + "\n")
+                out.append("\n".join(f"- [{t}]({p})" for t, p in data) + "\n")
         return "\n".join(out)
 
     def html(self, title: str) -> str:
@@ -118,9 +133,12 @@ class Doc:
         esc = html.escape
         for kind, data in self.blocks:
             if kind == "h":
-                body.append(f"<h{data[0]}>{esc(data[1])}</h{data[0]}>")
+                body.append(f"<h{data[0]}>{_inline_html(esc(data[1]))}</h{data[0]}>")
             elif kind == "p":
                 body.append(f"<p>{_inline_html(esc(data))}</p>")
+            elif kind == "headline":
+                body.append(f'<p class="headline" id="headline"><strong>{esc(data)}</strong>'
+                            "</p>")
             elif kind == "table":
                 frame, fmt = data
                 head = "".join(f"<th>{esc(str(c))}</th>" for c in frame.columns)
@@ -135,10 +153,19 @@ class Doc:
             elif kind == "links":
                 items = "".join(f'<li><a href="{esc(p)}">{esc(t)}</a></li>' for t, p in data)
                 body.append(f"<ul>{items}</ul>")
+            elif kind == "thumbs":
+                items = "".join(
+                    f'<figure class="thumb"><a href="{esc(p)}"><img src="{esc(p)}" '
+                    f'alt="{esc(t)}" loading="lazy"></a><figcaption>{esc(t)}</figcaption>'
+                    "</figure>" for t, p in data)
+                body.append(f'<div class="thumbs">{items}</div>')
         style = ("body{font-family:sans-serif;max-width:1200px;margin:auto;padding:1em}"
                  "table{border-collapse:collapse;font-size:12px;margin:0.5em 0}"
                  "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
-                 "img{max-width:100%}figcaption{font-size:12px;color:#555}")
+                 "img{max-width:100%}figcaption{font-size:12px;color:#555}"
+                 ".thumbs{display:flex;flex-wrap:wrap;gap:8px}"
+                 ".thumb{margin:0;width:280px}.thumb img{width:280px;border:1px solid #ddd}"
+                 ".headline{font-size:1.25em}")
         return (f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}"
                 f"</title><style>{style}</style></head><body>{''.join(body)}</body></html>\n")
 
@@ -423,7 +450,7 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
     unit = units[1]
     n_cfg = metrics.groupby(["rig", "curve_angle_deg", "radius_mm"], dropna=False).ngroups
     doc.h(1, "TSM hysteresis pipeline report")
-    doc.p(f"**{stages.headline(summary, metric=metric, unit=unit)}**")
+    doc.headline(stages.headline(summary, metric=metric, unit=unit))
     doc.p(f"{metrics['family'].nunique()} families x {n_cfg} configurations; identification "
           f"excitation `{fit_exc}`; {len(metrics)} metric rows "
           f"(`metrics.parquet`, `metrics.csv`). Dataset hash `{dataset_hash(paths.processed)}`."
@@ -449,7 +476,8 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
               "shape-aware model fitted without it (`unseen_shape.parquet`, "
               "`docs/unseen-shape.md`). Targets: shape-aware / own <= 1.15 and shape-aware "
               "below nearest in >= 20 of 24 configurations.")
-        doc.table(unseen)
+        doc.table(with_units(unseen, unit, also=("median_own", "median_nearest",
+                                                 "median_shape_aware")))
         fig = paths.reports / "plots" / "unseen_shape.png"
         if fig.exists():
             doc.img(fig, "Leave-one-configuration-out RMSE per configuration")
@@ -463,18 +491,21 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
                    .agg(lambda s: "/".join(sorted(s))))
         wide["best"] = winners
         wide.columns = [f"{c} [{unit}]" if c != "best" else c for c in wide.columns]
-        doc.table(wide.reset_index())
+        doc.table(with_units(wide.reset_index(), unit))
     doc.h(2, "Table 4.1 equivalent: Gamma weights Q and SSE per configuration")
     doc.p(f"{_gamma_constraint_text(fits)} SSE on the identification record(s) at the rig's "
           f"sample rate, in {unit}^2 (`gamma_weights.parquet`).")
     if not gamma.empty:
-        doc.table(gamma.drop(columns=["thresholds", "fit_excitation"]))
+        doc.p(f"Weights are printed to 3 decimals (in {unit} of output per {units[0]} of "
+              "input): a weight below 0.0005 is a solver's zero, not a finding.")
+        doc.table(gamma_table(gamma, units))
     if metrics["fit_excitation"].nunique() > 1:
         doc.h(2, f"Cross-excitation matrix (mean {metric} over the configurations)")
         doc.p("Rows: the model's identification excitation; columns: the evaluated one.")
         cross = metrics.pivot_table(index=["family", "fit_excitation"],
                                     columns="eval_excitation", values=metric, aggfunc="mean",
                                     observed=True)
+        cross.columns = [f"{c} [{unit}]" for c in cross.columns]
         doc.table(cross.reset_index())
     doc.h(2, "Error against curve angle and radius")
     for caption, fig in shape_figs:
@@ -482,18 +513,23 @@ def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: p
     doc.h(2, f"Exemplary configuration {exemplary.label}")
     for fig in config_plots.get(exemplary.label, []):
         if fig != elementary:
-            doc.img(fig, f"Measured vs model, time series and loops ({exemplary.label})")
+            doc.img(fig, f"Measured vs the best family, every family's residual, and the loop "
+                            f"({exemplary.label})")
     if elementary is not None:
         doc.img(elementary, "Weighted elementary operators of Gamma (seed 001 Fig. 4.12)")
     doc.h(2, "Every configuration")
-    doc.links([(label, figs[0]) for label, figs in sorted(config_plots.items()) if figs])
+    doc.p("Each configuration's figure: measured output and the best family, every family's "
+          "residual with its RMSE, and the best family's loop (click for full size).")
+    doc.thumbs([(_thumb_caption(label, board, metric, unit), figs[0])
+                for label, figs in sorted(config_plots.items()) if figs])
     failed = fits[fits["error"].notna()] if "error" in fits else fits.iloc[0:0]
     errors_file = paths.reports / "validate_errors.json"
     val_errors = json.loads(errors_file.read_text()) if errors_file.exists() else []
     if len(failed) or val_errors:
         doc.h(2, "Failures")
         if len(failed):
-            doc.table(failed[["family", "rig", "curve_angle_deg", "radius_mm", "error"]])
+            doc.table(with_units(failed[["family", "rig", "curve_angle_deg", "radius_mm",
+                                         "error"]], unit))
         for e in val_errors:
             doc.p(f"validate: {e}")
     return doc
@@ -504,9 +540,18 @@ _UNIT_METRICS = ("rmse", "mean_abs_error", "std_error", "error_range", "mean_err
                  "max_abs_error")
 
 
-def with_units(frame: pd.DataFrame, unit: str) -> pd.DataFrame:
-    """``frame`` with the unit in the header of every column that carries one."""
+#: Shape columns and their readable headers (the unit is the geometry's, not the signal's).
+_SHAPE_HEADERS = {"curve_angle_deg": "curve angle [deg]", "radius_mm": "radius [mm]"}
+
+
+def with_units(frame: pd.DataFrame, unit: str, *, also: Sequence[str] = ()) -> pd.DataFrame:
+    """``frame`` with the unit in the header of every column that carries one (``also``:
+    more columns in the output's unit); the shape columns read ``curve angle [deg]``."""
     def name(col: str) -> str:
+        if col in _SHAPE_HEADERS:
+            return _SHAPE_HEADERS[col]
+        if col in also:
+            return f"{col} [{unit}]"
         if col.endswith("sse") or col.endswith("_mse") or col == "mse":
             return f"{col} [{unit}^2]"
         if any(col == m or col.endswith("_" + m) for m in _UNIT_METRICS):
@@ -514,6 +559,33 @@ def with_units(frame: pd.DataFrame, unit: str) -> pd.DataFrame:
         return col
 
     return frame.rename(columns={c: name(str(c)) for c in frame.columns})
+
+
+def gamma_table(gamma: pd.DataFrame, units: tuple[str, str]) -> pd.DataFrame:
+    """The Table 4.1 equivalent as printed: weights rounded to 3 decimals (a solver's
+    1e-17 is a zero), units in every header."""
+    out = gamma.drop(columns=[c for c in ("thresholds", "fit_excitation") if c in gamma])
+    ratio = f"{units[1]}/{units[0]}"
+    weights = [c for c in out.columns if re.fullmatch(r"q\d+", str(c))] + ["weights_sum"]
+    for col in weights:
+        if col in out:
+            out[col] = out[col].astype(float).round(3) + 0.0  # + 0.0: no "-0"
+    out = out.rename(columns={c: f"{c} [{ratio}]" for c in weights if c in out})
+    return with_units(out, units[1])
+
+
+def _thumb_caption(label: str, board: pd.DataFrame, metric: str, unit: str) -> str:
+    """``90°/30 mm: gamma 0.093 mm`` (the configuration's winner and its held-out score)."""
+    col = f"heldout_{metric}"
+    rows = board[(board["rank"] == 1)] if "rank" in board else board.iloc[0:0]
+    for r in rows.to_dict("records"):
+        c = _config_of(r)
+        if c.label == label and col in r and r[col] == r[col]:
+            from pipelines.tracking import shape_text
+
+            shown = "" if unit in ("?", "") else f" {unit}"
+            return f"{shape_text(c)}: {r['family']} {float(r[col]):.2g}{shown}"
+    return label
 
 
 def _per_run_section(doc: Doc, by_run: pd.DataFrame, *, metric: str, unit: str) -> None:
@@ -531,6 +603,7 @@ def _per_run_section(doc: Doc, by_run: pd.DataFrame, *, metric: str, unit: str) 
                              aggfunc="max", observed=True)
     wide.loc["mean over runs"] = wide.mean()
     wide.loc["largest abs error"] = worst.max()
+    wide.columns = [f"{c} [{unit}]" for c in wide.columns]
     doc.table(wide.reset_index())
 
 
@@ -546,7 +619,9 @@ def _gamma_constraint_text(fits: pd.DataFrame) -> str:
     said = {"nonneg": "non-negative (Q >= 0) with a free output offset; sum(Q) is the "
                       "loop's outer slope (output per input), not 1",
             "sum_to_one": "under sum(Q) = 1 (seed 001 eq. 4.10 as its text means it)",
-            "free": "by ordinary least squares (any sign)"}
+            "free": "by ordinary least squares (any sign)",
+            "auto": "as each record decides (constraint=auto: Q >= 0 with a free offset, or "
+                    "free weights where they predict the record's last 30 % clearly better)"}
     if not seen:
         return "Weights Q of the Gamma operators."
     return "Weights identified " + "; ".join(said.get(c, c) for c in sorted(seen)) + "."
@@ -556,13 +631,15 @@ def main_cfg(cfg: Any) -> ReportResult:
     """What ``python -m pipelines.report`` does with its composed config (also MLflow)."""
     from pipelines import tracking
 
+    started = time.time()  # its own parent run spans the work, not only the logging
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
     result = run(plain)
     tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
                                                              root=paths.root))
     if tracker.enabled:
-        with tracking.StageRun(tracker, "report", sweep_dir=hydra_sweep_dir()) as stage_run:
+        with tracking.StageRun(tracker, "report", sweep_dir=hydra_sweep_dir(),
+                                start_time=started) as stage_run:
             assert stage_run.parent_id is not None
             log_report(tracker, stage_run.parent_id, result)
             hydra_dir = hydra_output_dir()

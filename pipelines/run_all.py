@@ -277,6 +277,7 @@ def _run_stages(cfg: Mapping[str, Any], paths: Paths, tracker: Any, result: Pipe
     from pipelines import fit, report, unseen_shape, validate
 
     total = time.perf_counter()
+    started = time.time()  # the parent run's start: its duration is the whole pipeline's
     if tracker.enabled:
         # Before any parallel worker exists: schema creation must happen exactly once.
         t0 = time.perf_counter()
@@ -333,8 +334,8 @@ def _run_stages(cfg: Mapping[str, Any], paths: Paths, tracker: Any, result: Pipe
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="mlflow") as pool:
         # (Hydra's compose is not thread-safe: the fit config is composed here, not there.)
         fit_cfg = stage_config("fit", cfg) if tracker.enabled else {}
-        pending = (pool.submit(_track_start, tracker, cfg, fit_cfg, paths, result, state)
-                   if tracker.enabled else None)
+        pending = (pool.submit(_track_start, tracker, cfg, fit_cfg, paths, result, state,
+                               started) if tracker.enabled else None)
         if "report" in wanted:
             t0 = time.perf_counter()
             state.stage = "report"
@@ -381,9 +382,12 @@ class TrackState:
 
 
 def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any],
-                 paths: Paths, result: PipelineResult, progress: _Progress) -> TrackState:
-    """Parent run + one child per fitted model; or, when nothing changed, a pointer run."""
-    from pipelines import tracking
+                 paths: Paths, result: PipelineResult, progress: _Progress,
+                 started: float | None = None) -> TrackState:
+    """Parent run + one child per fitted model; or, when nothing changed, a pointer run.
+    ``started`` (epoch seconds): when the pipeline began, the parent run's start time."""
+    from pipelines import lineage, tracking
+    from pipelines.common import dataset_units
     from pipelines.stages import Configuration
 
     start = time.perf_counter()
@@ -400,10 +404,19 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
     params = tracking.flatten({k: v for k, v in cfg.items() if k != "tracking"})
     previous = tracker.find_runs(
         f"tags.pipeline_key = '{key}' and tags.complete = 'true'")
+    units = dataset_units(paths.processed)
     parent = tracker.start_run("pipeline", tags={"stage": "pipeline", "kind": "parent",
-                                                 **tags})
+                                                 **tags},
+                               note=_pipeline_note(cfg, fits, paths), start_time=started)
     progress.parent = parent  # from here on a failure anywhere ends this run FAILED
     tracker.log(parent, params=params)
+    if paths.processed.is_dir():  # the unseen-shape study and the report read all of it
+        lineage.log_input(tracker, [parent],
+                          lineage.processed_input(paths.processed, context="evaluation"))
+        # what ingest did to every run (calibration, offsets, rejections)
+        for name in ("runs.json", "ingest_report.json"):
+            if (paths.processed / name).is_file():
+                tracker.log_artifact(parent, paths.processed / name, "ingest")
     if metrics is not None:
         tracker.log_table(parent, metrics, "tables/metrics.json")
         tracker.log_artifact(parent, paths.metrics_csv, "tables")
@@ -421,10 +434,8 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
         ids = tracking.log_model_runs(
             tracker, parent, fits=fits, metrics=metrics, base_params=base, tags=tags,
             hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, plots=None,
-            stage="pipeline", progress=bool(cfg["progress"]),
+            stage="pipeline", progress=bool(cfg["progress"]), units=units,
         )
-        from pipelines import lineage
-
         lineage.log_model_inputs(tracker, ids, fits, metrics, processed=paths.processed)
         labels = [Configuration(str(r["rig"]), tracking.finite_or_none(r["curve_angle_deg"]),
                                 tracking.finite_or_none(r["radius_mm"])).label
@@ -432,6 +443,19 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
         state.children = list(zip(ids, labels, strict=True))
     state.seconds = time.perf_counter() - start
     return state
+
+
+def _pipeline_note(cfg: Mapping[str, Any], fits: pd.DataFrame | None, paths: Paths) -> str:
+    """The pipeline parent run's description."""
+    source = (f"your logs ({_importer_name(cfg)}, {cfg.get('source')})" if own_data(cfg)
+              else "the virtual rig's campaign")
+    n = 0 if fits is None else len(fits)
+    families = "" if fits is None or fits.empty else ", ".join(
+        sorted(fits["family"].astype(str).unique()))
+    return (f"make pipeline on {source}: ingest -> fit -> validate -> unseen_shape -> "
+            f"report. {n} fitted models ({families}) as child runs, each with its training "
+            f"and validation data; the report and the leave-one-configuration-out summary "
+            f"are this run's artifacts. Data: {paths.processed.name}.")
 
 
 def _track_finish(tracker: Any, state: TrackState, result: PipelineResult) -> None:

@@ -46,6 +46,9 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 #: compare view charts families against each other across configurations.
 MAX_PARAM_CHARS = 6000
 
+#: The run tag MLflow's UI shows as a run's description.
+NOTE_TAG = "mlflow.note.content"
+
 T = TypeVar("T")
 
 
@@ -199,18 +202,17 @@ def metric_key(scope: str, name: str) -> str:
 def child_metrics(metrics: pd.DataFrame) -> dict[str, float]:
     """One model's metrics rows -> MLflow metrics with the consistent keys.
 
-    ``fit.<m>`` on the identification record, ``eval.<excitation>.<m>`` per evaluation
-    excitation, ``heldout.<m>`` the mean over the held-out excitations.
+    ``fit.<m>`` on the identification record, ``eval.<excitation>.<m>`` per held-out
+    excitation, ``heldout.<m>`` the mean over the held-out excitations. The identification
+    record is ``fit.*`` only: an ``eval.<fit excitation>.*`` copy would repeat it.
     """
     from hysteresis.metrics import METRIC_NAMES
 
     out: dict[str, float] = {}
     for row in metrics.to_dict("records"):
+        scope = "fit" if row["split"] == "fit" else f"eval.{row['eval_excitation']}"
         for name in METRIC_NAMES:
-            value = float(row[name])
-            out[metric_key(f"eval.{row['eval_excitation']}", name)] = value
-            if row["split"] == "fit":
-                out[metric_key("fit", name)] = value
+            out[metric_key(scope, name)] = float(row[name])
     held = metrics[metrics["split"] == "heldout"]
     if not held.empty:
         for name in METRIC_NAMES:
@@ -306,12 +308,18 @@ class Tracker:
 
     # -- runs -------------------------------------------------------------------------
     def start_run(self, name: str, *, parent_id: str | None = None,
-                  tags: Mapping[str, Any] | None = None) -> str:
+                  tags: Mapping[str, Any] | None = None, note: str | None = None,
+                  start_time: float | None = None) -> str:
+        """A new run; ``note`` is its description (the UI's *Description*),
+        ``start_time`` (epoch seconds) when the work it records began earlier."""
         all_tags = {"git_commit": git_commit(), **owner_tags(),
                     **{k: str(v) for k, v in (tags or {}).items()}}
         if parent_id:
             all_tags["mlflow.parentRunId"] = parent_id
-        run = retry(self.client.create_run, self.experiment_id, run_name=name, tags=all_tags)
+        if note:
+            all_tags[NOTE_TAG] = note
+        run = retry(self.client.create_run, self.experiment_id, run_name=name, tags=all_tags,
+                    start_time=None if start_time is None else int(start_time * 1000))
         return str(run.info.run_id)
 
     def end_run(self, run_id: str, *, status: str = "FINISHED") -> None:
@@ -319,9 +327,11 @@ class Tracker:
 
     @contextlib.contextmanager
     def run(self, name: str, *, parent_id: str | None = None,
-            tags: Mapping[str, Any] | None = None) -> Iterator[str]:
+            tags: Mapping[str, Any] | None = None, note: str | None = None,
+            start_time: float | None = None) -> Iterator[str]:
         """A run that ends FINISHED, or FAILED when the block raises (so none stays RUNNING)."""
-        run_id = self.start_run(name, parent_id=parent_id, tags=tags)
+        run_id = self.start_run(name, parent_id=parent_id, tags=tags, note=note,
+                                start_time=start_time)
         try:
             yield run_id
         except BaseException:
@@ -490,17 +500,34 @@ def inherited_parent(sweep_dir: str | Path | None = None) -> str | None:
     return None
 
 
+#: What a stage's own parent run is, for its description.
+STAGE_NOTES = {
+    "fit": "One fit invocation: its child runs are the fitted models (family x sheath "
+           "configuration x identification excitation).",
+    "validate": "One validate invocation: every model scored on its configuration's held-out "
+                "runs; the inputs are each configuration's training and validation data.",
+    "unseen_shape": "Leave-one-configuration-out: each shape predicted by its own model, the "
+                    "nearest other shape's and the shape-aware model fitted without it.",
+    "report": "The report (report.md/html, tables, figures) of the metrics on disk.",
+    "discrepancy": "What is the model missing? The discrepancy workflow on measured runs.",
+    "compensate": "The papers' compensation experiments on the (virtual) rig.",
+}
+
+
 class StageRun:
     """Context for one stage invocation: attach to an inherited parent or own a new one."""
 
     def __init__(self, tracker: Tracker, stage: str, *, sweep_dir: str | Path | None = None,
-                 tags: Mapping[str, Any] | None = None) -> None:
+                 tags: Mapping[str, Any] | None = None, note: str | None = None,
+                 start_time: float | None = None) -> None:
         self.tracker = tracker
         self.stage = stage
         self.parent_id: str | None = None
         self._own = False
         self._sweep_dir = sweep_dir
         self._tags = dict(tags or {})
+        self._note = note or STAGE_NOTES.get(stage)
+        self._start = start_time
 
     def __enter__(self) -> StageRun:
         if not self.tracker.enabled:
@@ -508,9 +535,16 @@ class StageRun:
         self.parent_id = inherited_parent(self._sweep_dir)
         if self.parent_id is None:
             self.parent_id = self.tracker.start_run(
-                self.stage, tags={"stage": self.stage, "kind": "parent", **self._tags})
+                self.stage, tags={"stage": self.stage, "kind": "parent", **self._tags},
+                note=self._note, start_time=self._start)
             self._own = True
         return self
+
+    @property
+    def owns(self) -> bool:
+        """True when this stage opened its parent run (not inherited from a pipeline or
+        sweep)."""
+        return self._own
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
         if self._own and self.parent_id is not None:
@@ -530,6 +564,7 @@ def log_model_runs(
     plots: Mapping[str, Iterable[Path]] | None = None,
     stage: str = "pipeline",
     progress: bool = False,
+    units: tuple[str, str] = ("?", "?"),
 ) -> list[str]:
     """One child run per fitted model (family x configuration x identification excitation).
 
@@ -540,6 +575,8 @@ def log_model_runs(
     the figures of its configuration (``plots`` maps a configuration label to files) and the
     ``.hydra`` folder. The artifacts are staged locally and uploaded in one call, so a run
     costs three store writes (create, log_batch, terminate) instead of one per file.
+    Runs are named short (:func:`model_run_name`) and described (:func:`model_run_note`,
+    ``units``: the input's and output's unit).
     """
     import json
     import tempfile
@@ -554,6 +591,8 @@ def log_model_runs(
         for key, group in metrics.groupby(keys, dropna=False, observed=True, sort=False):
             by_model[_model_key(*key)] = group.reset_index(drop=True)
     ids: list[str] = []
+    several_rigs = fits["rig"].nunique() > 1 if len(fits) else False
+    several_excitations = fits["fit_excitation"].nunique() > 1 if len(fits) else False
     records: Iterable[dict[str, Any]] = fits.to_dict("records")
     if progress:
         from tqdm import tqdm
@@ -597,8 +636,10 @@ def log_model_runs(
                     if f.is_file():
                         (staged / ".hydra" / f.name).symlink_to(f.resolve())
 
-            name = f"{fit['family']}/{config.label}/{fit['fit_excitation']}"
-            run_id = tracker.start_run(name, parent_id=parent_id, tags=run_tags)
+            name = model_run_name(str(fit["family"]), config, str(fit["fit_excitation"]),
+                                  rig=several_rigs, excitation=several_excitations)
+            note = model_run_note(fit, config, mine, units=units)
+            run_id = tracker.start_run(name, parent_id=parent_id, tags=run_tags, note=note)
             family_params = flatten(json.loads(str(fit["params_json"])), "family.")
             params = {**base_params, **family_params, "family.name": fit["family"]}
             values: dict[str, float] = {"fit_seconds": float(fit["fit_seconds"]),
@@ -614,6 +655,53 @@ def log_model_runs(
             tracker.end_run(run_id, status="FAILED" if failed else "FINISHED")
             ids.append(run_id)
     return ids
+
+
+def shape_text(config: Any) -> str:
+    """``90°/30 mm`` (curve angle / bend radius), or the rig for a rig without a shape."""
+    if config.curve_angle_deg is None and config.radius_mm is None:
+        return str(config.rig)
+    phi = "?" if config.curve_angle_deg is None else f"{config.curve_angle_deg:g}°"
+    r = "?" if config.radius_mm is None else f"{config.radius_mm:g} mm"
+    return f"{phi}/{r}"
+
+
+def model_run_name(family: str, config: Any, fit_excitation: str, *, rig: bool = False,
+                   excitation: bool = False) -> str:
+    """A model run's name, short enough for the runs table: ``gamma 90°/30 mm``; the rig
+    and the identification excitation only when the runs differ in them (the tags
+    ``configuration`` and ``fit_excitation`` always hold both)."""
+    parts = [family]
+    if rig and config.has_shape:
+        parts.append(str(config.rig))
+    parts.append(shape_text(config))
+    if excitation:
+        parts.append(f"on {fit_excitation}")
+    return " ".join(parts)
+
+
+def model_run_note(fit: Mapping[str, Any], config: Any, metrics: pd.DataFrame | None, *,
+                   units: tuple[str, str] = ("?", "?")) -> str:
+    """A model run's description: what was fitted on which runs, and how it scored."""
+    unit = units[1] if units[1] not in ("?", "") else ""
+    shape = (f"curve angle {config.curve_angle_deg:g} deg, bend radius {config.radius_mm:g} mm"
+             if config.has_shape else "no recorded sheath shape")
+    text = (f"{fit['family']} model of rig {config.rig} ({shape}), identified on "
+            f"{fit['fit_excitation']} (run {fit['fit_run_ids']}).")
+    if _present(fit.get("error")):
+        return text + f" The fit failed: {' '.join(str(fit['error']).split())[:300]}"
+    if metrics is not None and not metrics.empty:
+        held = metrics[metrics["split"] == "heldout"]
+        if not held.empty:
+            kinds = ", ".join(sorted(held["eval_excitation"].astype(str).unique()))
+            text += (f" Held-out RMSE {float(held['rmse'].astype(float).mean()):.3g} {unit} "
+                     f"(mean over {kinds}).").replace("  ", " ")
+        fit_rows = metrics[metrics["split"] == "fit"]
+        if not fit_rows.empty:
+            text += (f" RMSE on its identification record "
+                     f"{float(fit_rows['rmse'].astype(float).mean()):.3g} {unit}.").replace(
+                         "  ", " ")
+    return text
 
 
 def _model_key(family: Any, rig: Any, phi: Any, radius: Any, fit_exc: Any) -> tuple[Any, ...]:

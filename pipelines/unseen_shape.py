@@ -381,19 +381,26 @@ def main_cfg(cfg: Any) -> UnseenShapeResult:
     """What ``python -m pipelines.unseen_shape`` does with its composed config (also MLflow)."""
     from pipelines import tracking
 
+    started = time.time()  # its own parent run spans the work, not only the logging
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
     result = run(plain)
     tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
                                                              root=paths.root))
     if tracker.enabled:
-        with tracking.StageRun(tracker, "unseen_shape", sweep_dir=hydra_sweep_dir()) as stage:
+        with tracking.StageRun(tracker, "unseen_shape", sweep_dir=hydra_sweep_dir(),
+                                start_time=started) as stage:
             assert stage.parent_id is not None
             tracker.log(stage.parent_id,
                         params=tracking.flatten({k: v for k, v in plain.items()
                                                  if k != "tracking"}),
                         tags={"dataset_hash": dataset_hash(paths.processed)})
             log_result(tracker, stage.parent_id, result)
+            if paths.processed.is_dir():  # the study reads every run of the dataset
+                from pipelines import lineage
+
+                lineage.log_input(tracker, [stage.parent_id], lineage.processed_input(
+                    paths.processed, context="evaluation"))
             hydra_dir = hydra_output_dir()
             if hydra_dir is not None:
                 tracker.log_artifact(stage.parent_id, hydra_dir / ".hydra", ".hydra")

@@ -227,6 +227,7 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
     """What ``python -m pipelines.validate`` does with its composed config (also MLflow)."""
     from pipelines import tracking
 
+    started = time.time()  # its own parent run spans the work, not only the logging
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
     tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
@@ -235,7 +236,8 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
         tracker.init_store()  # a locked or damaged store stops the stage before the work
     metrics, errors = run(plain)
     if tracker.enabled:
-        with tracking.StageRun(tracker, "validate", sweep_dir=hydra_sweep_dir()) as stage_run:
+        with tracking.StageRun(tracker, "validate", sweep_dir=hydra_sweep_dir(),
+                                start_time=started) as stage_run:
             assert stage_run.parent_id is not None
             tracker.log(stage_run.parent_id,
                         params=tracking.flatten({k: v for k, v in plain.items()

@@ -126,3 +126,43 @@ def test_fit_only_runs_log_their_training_data_and_dataset_layout_without_runs_j
     client = MlflowClient(tracker.settings.tracking_uri)
     names = sorted(_inputs(client, i)["training"][0] for i in ids)
     assert names == ["tsm-bench_phi015_r030:sine_decay", "tsm-bench_phi090_r030:sine_decay"]
+
+
+def test_whole_dataset_source_and_measured_inputs_and_their_count(tmp_path: Path) -> None:
+    """The inputs of the runs that read data but fit no model (pipeline parent, discrepancy,
+    compensation): each names its data with a digest that follows the data, and
+    ``python -m pipelines.lineage`` counts the runs that log one."""
+    from pipelines.common import dataset_hash
+
+    data = make_dataset(angles=(90,), radii=(30,), dt=0.2)
+    ids = sorted(data["run_id"].unique())
+    processed = _write_ingest_layout(data, tmp_path, {r: "a" * 64 for r in ids})
+    whole = lineage.processed_input(processed, context="evaluation")
+    assert whole.dataset.digest == dataset_hash(processed)
+    assert whole.dataset.name == "virtual:all runs"
+    index = {r: {"source_hash": "a" * 64, "excitation": {"name": "sine_decay"}} for r in ids}
+    src = lineage.source_input(tmp_path / "raw", index, context="analysis")
+    again = lineage.source_input(tmp_path / "raw", {**index, ids[0]: {"source_hash": "b" * 64}},
+                                 context="analysis")
+    assert src.dataset.name == f"raw:{len(ids)} runs"
+    assert src.dataset.digest != again.dataset.digest  # a re-recorded run is other data
+    assert json.loads(src.dataset.profile)["excitations"] == ["sine_decay"]
+    tables = {"t": pd.DataFrame({"rmse": [0.1, 0.2]})}
+    measured = lineage.measured_input("compensation:seed001", tables, source="rig",
+                                      context="evaluation")
+    other = lineage.measured_input("compensation:seed001",
+                                   {"t": pd.DataFrame({"rmse": [0.1, 0.3]})}, source="rig",
+                                   context="evaluation")
+    assert measured.dataset.digest != other.dataset.digest
+
+    mlflow_store(tmp_path)
+    tracker = tracking.Tracker(tracking.settings_from_config({}, root=tmp_path))
+    runs = [tracker.start_run(f"r{i}") for i in range(4)]
+    lineage.log_input(tracker, runs[:1], whole)
+    lineage.log_input(tracker, [runs[1], None], src)
+    lineage.log_input(tracker, runs[2:3], measured)
+    for run_id in runs:
+        tracker.end_run(run_id)
+    assert lineage.input_coverage(tracker.client, [tracker.experiment_id]) == (3, 4)
+    assert lineage.main(["--store", tracker.settings.tracking_uri, "--min", "75"]) == 0
+    assert lineage.main(["--store", tracker.settings.tracking_uri, "--min", "95"]) == 1

@@ -42,7 +42,8 @@ def registered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     fits = fit_stage.run(cfg, dataset=data)
     metrics, _ = validate_stage.run(cfg, dataset=data)
     tracker = _store_with_model_runs(root, fits, metrics, "h1")
-    done = registry.register_champions(tracker, fits, metrics, data_hash="h1")
+    done = registry.register_champions(tracker, fits, metrics, data_hash="h1",
+                                       units=("mm", "mm"))
     return {"root": root, "data": data, "fits": fits, "metrics": metrics, "tracker": tracker,
             "done": done}
 
@@ -71,6 +72,56 @@ def test_one_champion_per_configuration_with_the_lowest_heldout_rmse(
     assert run.data.tags["model_key"] == table.iloc[0]["model_key"]
     # the large curve angle has real hysteresis: a hysteresis family wins there, not linear
     assert table.loc["tsm.tsm-bench_phi090_r030"]["family"] != "linear"
+
+
+def test_each_version_wraps_a_logged_model_from_code_with_units_and_an_example(
+        registered: dict[str, object], tmp_path: Path) -> None:
+    """MLflow 3's way: one logged model per champion, the output of its run, its code a
+    file (set_model), a signature whose units are in the metadata, an input example."""
+    import mlflow
+    import yaml
+
+    tracker = registered["tracker"]
+    client = tracker.client  # type: ignore[attr-defined]
+    uri = tracker.settings.tracking_uri  # type: ignore[attr-defined]
+    exp_id = tracker.experiment_id  # type: ignore[attr-defined]
+    mlflow.set_tracking_uri(uri)
+    try:
+        models = mlflow.search_logged_models(experiment_ids=[exp_id], output_format="list")
+    finally:
+        mlflow.set_tracking_uri(None)
+    table = registry.champion_table(tracker).set_index("name")
+    assert len(models) == len(table) == 2
+    for name, row in table.iterrows():
+        version = client.get_model_version(name, row["version"])
+        model = client.get_logged_model(version.source.removeprefix("models:/"))
+        assert model.source_run_id == row["run_id"] == version.run_id
+        run = client.get_run(row["run_id"])
+        assert [o.model_id for o in run.outputs.model_outputs] == [model.model_id]
+        assert model.tags["family"] == row["family"] == version.tags["family"]
+        assert version.tags["configuration"] == name.split(".", 1)[1]
+        assert version.tags["score"].startswith("held-out RMSE ")
+        assert row["family"] in version.description and "held-out RMSE" in version.description
+        assert {m.key for m in model.metrics} >= {"heldout.rmse"}
+        registered_model = client.get_registered_model(name)
+        assert registered_model.tags["champion_family"] == row["family"]
+        assert row["family"] in registered_model.description
+        folder = Path(mlflow.artifacts.download_artifacts(
+            artifact_uri=model.artifact_location, dst_path=str(tmp_path / name),
+            tracking_uri=uri))
+        mlmodel = yaml.safe_load((folder / "MLmodel").read_text())
+        pyfunc = mlmodel["flavors"]["python_function"]
+        # the code file is the model: nothing pickled (a pickled model has python_model.pkl)
+        assert pyfunc["loader_module"] == "mlflow.pyfunc.loaders.code_model"
+        assert (folder / "pyfunc_model.py").is_file() and "python_model" not in pyfunc
+        assert not list(folder.rglob("*.pkl"))
+        assert mlmodel["metadata"]["signature_units"] == {"input": "mm", "output": "mm",
+                                                          "state": "JSON"}
+        assert version.tags["unit.output"] == "mm" and version.tags["score"].endswith(" mm")
+        assert [c["name"] for c in json.loads(mlmodel["signature"]["inputs"])] == ["input",
+                                                                                 "state"]
+        example = json.loads((folder / "input_example.json").read_text())
+        assert len(example["data"]) == 40
 
 
 def test_registering_again_with_nothing_changed_adds_no_version(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +74,18 @@ def test_table41_equivalent_recovers_known_weights_and_report_is_complete(
     assert "Table 4.1 equivalent" in md and "Leaderboard" in md
     html = (reports / "report.html").read_text()
     assert html.startswith("<!doctype html>") and "elementary_tsm-bench_phi090_r030.png" in html
+    # read first: the headline; rendered Markdown; a unit in every table's header;
+    # thumbnails of every configuration; weights rounded to what they mean
+    assert '<p class="headline" id="headline"><strong>gamma wins 2 of 2 configurations' in html
+    assert "`" not in html and "**" not in html
+    for table in re.findall(r"<thead>(.*?)</thead>", html):
+        assert re.search(r"<th>[^<]*\[[^<\]]+\]</th>", table), table
+        for head in re.findall(r"<th>([^<]*)</th>", table):
+            if any(w in head for w in ("rmse", "sse", "error")):
+                assert "[" in head, head
+    assert html.count('<figure class="thumb">') == 2
+    # (this dataset's index names no units: "?" says so rather than guessing mm)
+    assert "q1 [?/?]" in html and "curve angle [deg]" in html
     assert set(result.config_plots) == {"tsm-bench_phi045_r030", "tsm-bench_phi090_r030"}
     # nothing changed: nothing redrawn
     mtime = (reports / "report.md").stat().st_mtime_ns

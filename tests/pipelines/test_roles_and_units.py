@@ -93,7 +93,9 @@ def test_units_reach_the_plot_axes_and_the_table_headers(tmp_path: Path) -> None
                                    units=("mm", "deg"))
     finally:
         plt.Axes.set_ylabel = real  # type: ignore[method-assign]
-    assert seen and all(s == "output [deg]" for s in seen)
+    # every y axis in the output's unit: the signal and its residual
+    assert "output [deg]" in seen and "residual [deg]" in seen
+    assert all(s in ("output [deg]", "residual [deg]") for s in seen)
     headers = with_units(pd.DataFrame(columns=["family", "median_heldout_rmse", "sse",
                                                "median_ratio"]), "deg").columns
     assert list(headers) == ["family", "median_heldout_rmse [deg]", "sse [deg^2]",

@@ -87,6 +87,15 @@ def test_child_runs_carry_params_metrics_tags_and_artifacts(tmp_path: Path) -> N
         assert run_keys == keys
         assert {"fit.sse", "heldout.rmse", "eval.triangle_decay.rmse",
                 "eval.trapezoid_decay.std_error"} <= run_keys
+        # the identification record is fit.* only, not repeated as eval.<its excitation>.*
+        assert not any(k.startswith(f"eval.{tags['fit_excitation']}.") for k in run_keys)
+        # a short name the runs table shows whole, and a description saying what it is
+        angle = tags["curve_angle_deg"]
+        assert run.info.run_name == f"{tags['family']} {angle}°/30 mm"
+        note = tags["mlflow.note.content"]
+        assert note.startswith(f"{tags['family']} model of rig tsm-bench (curve angle {angle} "
+                               "deg, bend radius 30 mm), identified on sine_decay")
+        assert "Held-out RMSE" in note
         arts = {a.path for a in client.list_artifacts(run.info.run_id)}
         assert {"model", "metrics.json", ".hydra"} <= arts
         model_json = client.download_artifacts(run.info.run_id, "model/model.json",
