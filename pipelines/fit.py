@@ -246,11 +246,12 @@ def fit_metrics(fits: pd.DataFrame, dataset: pd.DataFrame, cfg: Mapping[str, Any
     """In-sample metrics (split ``fit``) of the given fits, for the stage's own MLflow runs."""
     sig = cfg["signals"]
     frames = []
+    located = stages.ConfigurationRows(dataset)
     for _, group in fits.groupby(["rig", "curve_angle_deg", "radius_mm"], dropna=False):
         first = group.iloc[0]
         config = stages.Configuration(str(first["rig"]), stages._num(first["curve_angle_deg"]),
                                       stages._num(first["radius_mm"]))
-        signals = stages.run_signals(stages.config_rows(dataset, config),
+        signals = stages.run_signals(located.rows(config),
                                      input_col=str(sig["input"]), output_col=str(sig["output"]))
         metrics, _, _ = stages.evaluate_configuration(group, signals, heldout=[], cross=False)
         frames.append(metrics)

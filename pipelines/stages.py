@@ -176,6 +176,30 @@ def config_rows(dataset: pd.DataFrame, config: Configuration) -> pd.DataFrame:
     return dataset.loc[mask]
 
 
+class ConfigurationRows:
+    """The samples of each configuration, located in one pass over the dataset.
+
+    :func:`config_rows` compares every row of the dataset for each configuration, so a stage
+    calling it per configuration grows with the square of the map's size; this keeps only
+    the row positions of each configuration (no copy of the data) and takes its rows on
+    demand.
+    """
+
+    def __init__(self, dataset: pd.DataFrame) -> None:
+        self.dataset = dataset
+        groups = dataset.groupby(list(CONFIG_COLUMNS), sort=False, dropna=False,
+                                 observed=True).indices
+        self._positions = {Configuration(str(k[0]), _num(k[1]), _num(k[2])): v
+                           for k, v in groups.items()}
+
+    def rows(self, config: Configuration) -> pd.DataFrame:
+        """What ``config_rows(dataset, config)`` returns."""
+        positions = self._positions.get(config)
+        if positions is None:  # a value that matches only within config_rows' tolerance
+            return config_rows(self.dataset, config)
+        return self.dataset.iloc[positions]
+
+
 @dataclass(frozen=True)
 class RunSignal:
     """The input/output of one run, time-ordered, with a hash of exactly these values."""
@@ -452,8 +476,9 @@ def plan_fits(
     chosen = set(map(str, fit_runs))
     too_long: list[str] = []
     tasks: list[FitTask] = []
+    located = ConfigurationRows(dataset)
     for config in configs:
-        by_kind = run_signals(config_rows(dataset, config), input_col=input_col,
+        by_kind = run_signals(located.rows(config), input_col=input_col,
                               output_col=output_col)
         own = {r.run_id for rs in by_kind.values() for r in rs} & set(marked)
         for kind in fit_excitations:

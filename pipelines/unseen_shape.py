@@ -251,8 +251,9 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
 
     runs: dict[str, list[RunSignal]] = {}
     signals: dict[str, dict[str, list[RunSignal]]] = {}
+    located = stages.ConfigurationRows(dataset)
     for c in configs:
-        by_kind = stages.run_signals(stages.config_rows(dataset, c), input_col=input_col,
+        by_kind = stages.run_signals(located.rows(c), input_col=input_col,
                                      output_col=output_col)
         signals[c.label] = by_kind
         kinds = eval_kinds or sorted(k for k in by_kind if k != fit_exc)
