@@ -32,6 +32,7 @@ from pipelines.common import (
     hydra_sweep_dir,
     identification_plan,
     read_processed,
+    stage_columns,
     run_stage,
     to_container,
 )
@@ -212,7 +213,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
     paths = Paths.from_config(cfg["paths"])
     clean_leftovers(paths.models)  # temporaries of a killed fit
     if dataset is None:
-        dataset = read_processed(paths.processed)
+        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
     input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
     sel = cfg["config"]
     configs = stages.configurations(dataset, rig=sel["rig"],

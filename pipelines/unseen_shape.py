@@ -46,6 +46,7 @@ from pipelines.common import (
     hydra_output_dir,
     hydra_sweep_dir,
     read_processed,
+    stage_columns,
     run_stage,
     to_container,
 )
@@ -261,7 +262,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     cfg = schemas.with_defaults(schemas.UnseenShapeConfig, cfg)
     paths = Paths.from_config(cfg["paths"])
     if dataset is None:
-        dataset = read_processed(paths.processed)
+        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
     input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
     stages.check_dataset(dataset, signals=(input_col, output_col))
     sel = cfg["config"]

@@ -37,6 +37,7 @@ from pipelines.common import (
     hydra_sweep_dir,
     identification_plan,
     read_processed,
+    stage_columns,
     run_stage,
     to_container,
 )
@@ -92,7 +93,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     clean_leftovers(paths.predictions)  # temporaries of a killed validate
     clean_leftovers(paths.reports, recursive=False)
     if dataset is None:
-        dataset = read_processed(paths.processed)
+        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
     plan = identification_plan(cfg, dataset, paths)
     dataset = plan.dataset
     input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
