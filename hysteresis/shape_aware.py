@@ -36,6 +36,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -377,9 +378,15 @@ def leave_one_out_models(
         column = [getattr(m, name, None) for m in models]
         stacked = _float_stack(column)
         if stacked is None:
-            # the fold regresses it only when the one odd value is its own: fit those folds
-            ok &= np.array([_float_stack(column[:i] + column[i + 1:]) is None
-                            for i in range(n)])
+            # a fold regresses it only when the one odd value (not a finite float array, or
+            # of another shape) is its own: leave that fold to the caller
+            bad = [j for j, v in enumerate(column) if _float_stack([v]) is None]
+            if not bad:
+                dims = [np.shape(v) for v in column]
+                seen = Counter(dims)
+                bad = [j for j, d in enumerate(dims) if seen[d] == 1] if len(seen) == 2 else []
+            if len(bad) == 1:
+                ok[bad[0]] = False
             continue
         flat = stacked.reshape(n, -1)
         same0 = np.all(flat == flat[0], axis=1)

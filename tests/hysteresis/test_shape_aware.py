@@ -223,6 +223,20 @@ def test_closed_form_leave_one_out_equals_refitting_every_fold(
                                        err_msg=f"fold {i} {name}")
 
 
+def test_closed_form_leave_one_out_with_one_odd_value() -> None:
+    # one shape's offset is not finite: only the fold leaving it out regresses the offset
+    shapes = [(p, r) for p in ANGLES for r in RADII]
+    models = [_gamma(*s) for s in shapes]
+    models[5].offset_ = float("nan")
+    solved = leave_one_out_models(shapes, models, base_family="gamma")
+    assert [i for i, s in enumerate(solved) if s is None] == [5]
+    for i, got in enumerate(solved):
+        if got is not None:
+            want, _ = _explicit_fold(shapes, models, i)
+            np.testing.assert_allclose(got[0].offset_, want.offset_, rtol=1e-9)
+            np.testing.assert_allclose(got[0].weights_, want.weights_, rtol=1e-9, atol=1e-12)
+
+
 def test_closed_form_leave_one_out_leaves_rbf_to_the_caller() -> None:
     shapes = [(p, r) for p in ANGLES for r in RADII]
     assert leave_one_out_models(shapes, [_gamma(*s) for s in shapes], base_family="gamma",
