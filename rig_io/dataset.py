@@ -25,7 +25,7 @@ import pyarrow.parquet as pq
 
 from rig_io.atomic import atomic_path, contained, safe_part, write_text_atomic
 from rig_io.errors import RigIOError
-from rig_io.schema import ARROW_SCHEMA, COLUMNS, SCHEMA_VERSION, validate
+from rig_io.schema import ARROW_SCHEMA, COLUMNS, SCHEMA_VERSION, STRING_COLUMNS, validate
 
 SAMPLES = "samples"
 RUNS = "runs.json"
@@ -111,8 +111,16 @@ def read_dataset(path: str | os.PathLike[str], *, runs: list[str] | None = None,
         tables = [pq.read_table(f, schema=ARROW_SCHEMA, columns=list(wanted)) for f in files]
     except (OSError, pa.ArrowException) as err:
         raise RigIOError(f"unreadable dataset: {err}", file=str(p)) from None
-    frame = pa.concat_tables(tables).to_pandas()
+    table = pa.concat_tables(tables)
     del tables
+    # Strings stay Arrow arrays in pandas; one chunk per file would make every row selection
+    # (one configuration's rows) concatenate the whole column first.
+    for name in STRING_COLUMNS:
+        if name in table.column_names:
+            table = table.set_column(table.column_names.index(name), name,
+                                     table.column(name).combine_chunks())
+    frame = table.to_pandas()
+    del table
     frame = frame.loc[:, list(wanted)]
     for col in ("run_id", "rig", "excitation"):
         if col in frame:
