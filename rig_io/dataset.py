@@ -81,7 +81,7 @@ def read_dataset(path: str | os.PathLike[str], *, runs: list[str] | None = None,
     ``columns``: read only these (kept in the dataset's column order); a stage that needs
     a few of the fifteen columns holds a third of the memory.
     """
-    wanted = COLUMNS if columns is None else tuple(c for c in COLUMNS if c in set(columns))
+    keep = COLUMNS if columns is None else tuple(c for c in COLUMNS if c in set(columns))
     unknown = sorted(set(columns or ()) - set(COLUMNS))
     if unknown:
         raise RigIOError(f"column(s) {unknown} not in the dataset schema; it has {list(COLUMNS)}",
@@ -108,7 +108,7 @@ def read_dataset(path: str | os.PathLike[str], *, runs: list[str] | None = None,
     else:
         raise RigIOError("dataset does not exist", file=str(p))
     try:
-        tables = [pq.read_table(f, schema=ARROW_SCHEMA, columns=list(wanted)) for f in files]
+        tables = [pq.read_table(f, schema=ARROW_SCHEMA, columns=list(keep)) for f in files]
     except (OSError, pa.ArrowException) as err:
         raise RigIOError(f"unreadable dataset: {err}", file=str(p)) from None
     table = pa.concat_tables(tables)
@@ -121,12 +121,12 @@ def read_dataset(path: str | os.PathLike[str], *, runs: list[str] | None = None,
                                      table.column(name).combine_chunks())
     frame = table.to_pandas()
     del table
-    frame = frame.loc[:, list(wanted)]
+    frame = frame.loc[:, list(keep)]
     for col in ("run_id", "rig", "excitation"):
         if col in frame:
             frame[col] = frame[col].astype("str")
     if validate_rows:
-        frame = validate(frame, where="read", columns=wanted, inplace=True)
+        frame = validate(frame, where="read", columns=keep, inplace=True)
     return frame.reset_index(drop=True)
 
 

@@ -70,6 +70,9 @@ def test_the_stages_read_only_the_columns_they_use(tmp_path: Path) -> None:
     part = read_processed(tmp_path, cols)
     assert list(part.columns) == cols
     pd.testing.assert_frame_equal(part, read_dataset(tmp_path)[cols])
+    one = str(data["run_id"].iloc[0])
+    pd.testing.assert_frame_equal(read_dataset(tmp_path, runs=[one], columns=cols),
+                                  part[part["run_id"] == one].reset_index(drop=True))
     # a signal the schema does not know is left to the stage's check, which names it
     assert list(read_processed(tmp_path, [*cols, "strain"]).columns) == cols
     with pytest.raises(RigIOError, match="strain"):
