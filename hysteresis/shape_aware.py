@@ -347,7 +347,6 @@ def leave_one_out_models(
     est.shapes_ = shapes
     est.feature_min_ = lo
     est.feature_span_ = np.where(np.ptp(feats, axis=0) > 0, np.ptp(feats, axis=0), 1.0)
-    degrees = est.degrees()
     for col, asked in ((0, int(est.angle_degree)), (1, int(est.curvature_degree))):
         values, counts = np.unique(shapes[:, col], return_inverse=False, return_counts=True)
         if min(asked, values.size - 2) != min(asked, values.size - 1):  # a fold lowers it
@@ -382,7 +381,7 @@ def leave_one_out_models(
             # of another shape) is its own: leave that fold to the caller
             bad = [j for j, v in enumerate(column) if _float_stack([v]) is None]
             if not bad:
-                dims = [np.shape(v) for v in column]
+                dims = [np.shape(np.asarray(v)) for v in column]
                 seen = Counter(dims)
                 bad = [j for j, d in enumerate(dims) if seen[d] == 1] if len(seen) == 2 else []
             if len(bad) == 1:

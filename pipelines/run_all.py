@@ -41,8 +41,8 @@ from pipelines.common import (
     hydra_output_dir,
     identification_plan,
     read_processed,
-    stage_columns,
     run_stage,
+    stage_columns,
     to_container,
 )
 from pipelines.stages import PipelineError

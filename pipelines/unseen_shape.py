@@ -46,8 +46,8 @@ from pipelines.common import (
     hydra_output_dir,
     hydra_sweep_dir,
     read_processed,
-    stage_columns,
     run_stage,
+    stage_columns,
     to_container,
 )
 from pipelines.stages import Configuration, PipelineError, RunSignal

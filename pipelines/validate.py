@@ -37,8 +37,8 @@ from pipelines.common import (
     hydra_sweep_dir,
     identification_plan,
     read_processed,
-    stage_columns,
     run_stage,
+    stage_columns,
     to_container,
 )
 from pipelines.stages import Configuration, RunSignal
