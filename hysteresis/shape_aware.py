@@ -36,6 +36,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -269,6 +270,7 @@ def _float_stack(column: Sequence[Any]) -> FloatArray | None:
 def refit_on_common_structure(
     models: Sequence[HysteresisModel], records: Sequence[tuple[FloatArray, FloatArray]], *,
     keys: Sequence[Any] | None = None, memo: dict[tuple[Any, str], HysteresisModel] | None = None,
+    sse_memo: dict[tuple[Any, str], float] | None = None,
 ) -> tuple[list[HysteresisModel], dict[str, Any]]:
     """``models`` (one family, each fitted on its record) refitted with one common structure,
     so their parameters compare: of the family's
@@ -277,7 +279,8 @@ def refit_on_common_structure(
     they already share a structure.
 
     ``memo`` (keyed by ``keys[i]``, default the index, and the candidate) keeps refits between
-    calls on overlapping sets (leave-one-out folds).
+    calls on overlapping sets (leave-one-out folds), ``sse_memo`` their squared errors (a
+    fold then sums them instead of simulating every other record again).
     """
     if len(records) != len(models):
         raise HysteresisError(f"{len(models)} models but {len(records)} records")
@@ -296,9 +299,119 @@ def refit_on_common_structure(
                     warnings.simplefilter("ignore")
                     store[(key, tag)] = type(model)(**{**model.get_params(), **cand}).fit(u, y)
             refit = store[(key, tag)]
-            sse += float(np.sum((np.asarray(y) - refit.predict(u)) ** 2))
+            err = sse_memo.get((key, tag)) if sse_memo is not None else None
+            if err is None:
+                err = float(np.sum((np.asarray(y) - refit.predict(u)) ** 2))
+                if sse_memo is not None:
+                    sse_memo[(key, tag)] = err
+            sse += err
             refits.append(refit)
         if best is None or sse < best[0]:
             best = (sse, refits, cand)
     assert best is not None
     return best[1], best[2]
+
+
+def leave_one_out_models(
+    shapes: Any, models: Sequence[HysteresisModel], **params: Any,
+) -> list[tuple[HysteresisModel, int] | None]:
+    """Leave-one-configuration-out without refitting the regression once per configuration.
+
+    For each ``i``: what ``ShapeAwareModel(**params).fit(shapes without i, models without
+    i)`` would hand out for shape ``i`` (``model_for``) and the index (into ``models``) of
+    the training configuration nearest to it, as ``(model, nearest)``. The ``poly`` model is
+    a ridge regression, linear in its coefficients, with the same design for every fold, so
+    one solve on all the configurations gives every fold's prediction through the PRESS
+    residual: ``y_i - e_i / (1 - h_ii)`` (``e``: the residuals of the fit on all, ``h``: the
+    diagonal of its hat matrix ``A (A'A + P'P)^-1 A'``), for all the parameters at once.
+
+    A fold that is not the same regression with one row fewer is ``None`` (the caller fits
+    it): ``method="rbf"``; leaving the shape out moves the feature scaling (the only shape
+    at an extreme angle or radius) or lowers the degrees (the only shape at an angle or
+    radius); a parameter that is not one float array of one shape on every other
+    configuration (or only on the others); a hat value near 1 (a fold the basis cannot
+    determine).
+    """
+    shapes = np.asarray(shapes, dtype=np.float64)
+    n = shapes.shape[0]
+    est = ShapeAwareModel(**params)
+    if est.method != "poly" or n < 3 or len(models) != n:
+        return [None] * n
+    feats = shape_features(shapes[:, 0], shapes[:, 1])
+    lo, hi = feats.min(axis=0), feats.max(axis=0)
+    ok = np.ones(n, dtype=bool)
+    for col in range(feats.shape[1]):  # the fold's scaling must equal the full one
+        f = feats[:, col]
+        ok &= ~(((f == lo[col]) & (np.sum(f == lo[col]) == 1))
+                | ((f == hi[col]) & (np.sum(f == hi[col]) == 1)))
+    est.shapes_ = shapes
+    est.feature_min_ = lo
+    est.feature_span_ = np.where(np.ptp(feats, axis=0) > 0, np.ptp(feats, axis=0), 1.0)
+    for col, asked in ((0, int(est.angle_degree)), (1, int(est.curvature_degree))):
+        values, counts = np.unique(shapes[:, col], return_inverse=False, return_counts=True)
+        if min(asked, values.size - 2) != min(asked, values.size - 1):  # a fold lowers it
+            lonely = values[counts == 1]
+            ok &= ~np.isin(shapes[:, col], lonely)
+    x = est._scaled(feats)
+    a = est._basis(x)
+    p = a.shape[1]
+    if p > n - 1 and float(est.ridge) == 0.0:  # every fold is underdetermined: it raises
+        return [None] * n
+    pen = np.full(p, float(est.ridge))
+    pen[0] = 0.0
+    gram = a.T @ a + np.diag(pen)
+    if np.linalg.cond(gram) > 1e12:  # rank-deficient: least squares picks the least norm
+        return [None] * n
+    gram_inv = np.linalg.inv(gram)
+    leverage = np.einsum("ij,jk,ik->i", a, gram_inv, a)
+    ok &= (1.0 - leverage) > 1e-8
+    # nearest other configuration in the scaled plane (the fold's scaling is the full one)
+    dist = np.sum((x[:, None, :] - x[None, :, :]) ** 2, axis=2)
+    np.fill_diagonal(dist, np.inf)
+    nearest = np.argmin(dist, axis=1)
+
+    dicts = [m.to_dict() for m in models]
+    names = list(dict.fromkeys(k for m in models for k in m.fitted_attributes()))
+    loo: dict[str, tuple[FloatArray, FloatArray]] = {}  # name -> (loo values, fold keeps)
+    for name in names:
+        column = [getattr(m, name, None) for m in models]
+        stacked = _float_stack(column)
+        if stacked is None:
+            # a fold regresses it only when the one odd value (not a finite float array, or
+            # of another shape) is its own: leave that fold to the caller
+            bad = [j for j, v in enumerate(column) if _float_stack([v]) is None]
+            if not bad:
+                dims = [np.shape(np.asarray(v)) for v in column]
+                seen = Counter(dims)
+                bad = [j for j, d in enumerate(dims) if seen[d] == 1] if len(seen) == 2 else []
+            if len(bad) == 1:
+                ok[bad[0]] = False
+            continue
+        flat = stacked.reshape(n, -1)
+        same0 = np.all(flat == flat[0], axis=1)
+        same1 = np.all(flat == flat[1], axis=1)
+        # fold i keeps the nearest model's value when the others all agree
+        keeps = np.array([bool(np.all(same1[1:])) if i == 0
+                          else int(np.sum(~same0)) - int(not same0[i]) == 0 for i in range(n)])
+        coef = gram_inv @ (a.T @ flat)
+        resid = flat - a @ coef
+        with np.errstate(divide="ignore", invalid="ignore"):
+            values = flat - resid / (1.0 - leverage)[:, None]
+        loo[name] = (values, keeps)
+    out: list[tuple[HysteresisModel, int] | None] = []
+    for i in range(n):
+        if not ok[i]:
+            out.append(None)
+            continue
+        j = int(nearest[i])
+        model = HysteresisModel.from_dict(dicts[j])
+        for name, value in model.fitted_attributes().items():
+            if name not in loo or loo[name][1][i]:
+                continue
+            new = loo[name][0][i]
+            if isinstance(value, np.ndarray):
+                setattr(model, name, np.ascontiguousarray(new.reshape(value.shape)))
+            else:
+                setattr(model, name, float(new[0]))
+        out.append((model, j))
+    return out

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
@@ -130,8 +130,9 @@ def to_container(cfg: Any) -> dict[str, Any]:
     return {str(k): v for k, v in data.items()}
 
 
-def read_processed(path: Path) -> pd.DataFrame:
-    """The processed dataset: ``rig_io.dataset.read_dataset`` (validated) when available."""
+def read_processed(path: Path, columns: Sequence[str] | None = None) -> pd.DataFrame:
+    """The processed dataset: ``rig_io.dataset.read_dataset`` (validated) when available;
+    ``columns``: only these (:func:`stage_columns`)."""
     if not path.exists():
         raise PipelineError(
             f"processed dataset {path} does not exist; run `make ingest` (or `make pipeline`)"
@@ -139,8 +140,21 @@ def read_processed(path: Path) -> pd.DataFrame:
     try:
         from rig_io.dataset import read_dataset
     except ImportError:  # ingest not landed yet: plain parquet
-        return pd.read_parquet(path)
-    return read_dataset(path)
+        return pd.read_parquet(path, columns=list(columns) if columns else None)
+    from rig_io.schema import COLUMNS
+
+    # a signal the schema does not know is left to the stage's own check (which names it)
+    return read_dataset(path, columns=None if columns is None
+                        else [c for c in columns if c in COLUMNS])
+
+
+def stage_columns(signals: Mapping[str, Any]) -> list[str]:
+    """The dataset columns fit, validate and unseen_shape read: the configuration, run and
+    time columns and the two signals (``cfg["signals"]``)."""
+    from pipelines.stages import REQUIRED_DATASET_COLUMNS
+
+    return list(dict.fromkeys([*REQUIRED_DATASET_COLUMNS, str(signals["input"]),
+                               str(signals["output"])]))
 
 
 def dataset_units(path: Path) -> tuple[str, str]:

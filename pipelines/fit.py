@@ -34,6 +34,7 @@ from pipelines.common import (
     identification_plan,
     read_processed,
     run_stage,
+    stage_columns,
     to_container,
 )
 from pipelines.stages import FamilySpec, FitTask, PipelineError
@@ -213,7 +214,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
     paths = Paths.from_config(cfg["paths"])
     clean_leftovers(paths.models)  # temporaries of a killed fit
     if dataset is None:
-        dataset = read_processed(paths.processed)
+        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
     input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
     sel = cfg["config"]
     configs = stages.configurations(dataset, rig=sel["rig"],
@@ -247,11 +248,12 @@ def fit_metrics(fits: pd.DataFrame, dataset: pd.DataFrame, cfg: Mapping[str, Any
     """In-sample metrics (split ``fit``) of the given fits, for the stage's own MLflow runs."""
     sig = cfg["signals"]
     frames = []
+    located = stages.ConfigurationRows(dataset)
     for _, group in fits.groupby(["rig", "curve_angle_deg", "radius_mm"], dropna=False):
         first = group.iloc[0]
         config = stages.Configuration(str(first["rig"]), stages._num(first["curve_angle_deg"]),
                                       stages._num(first["radius_mm"]))
-        signals = stages.run_signals(stages.config_rows(dataset, config),
+        signals = stages.run_signals(located.rows(config),
                                      input_col=str(sig["input"]), output_col=str(sig["output"]))
         metrics, _, _ = stages.evaluate_configuration(group, signals, heldout=[], cross=False)
         frames.append(metrics)

@@ -42,6 +42,7 @@ from pipelines.common import (
     identification_plan,
     read_processed,
     run_stage,
+    stage_columns,
     to_container,
 )
 from pipelines.stages import PipelineError
@@ -298,7 +299,7 @@ def _run_stages(cfg: Mapping[str, Any], paths: Paths, tracker: Any, result: Pipe
     dataset = planned = None
     if any(s in wanted for s in ("fit", "validate", "unseen_shape")):
         t0 = time.perf_counter()
-        dataset = read_processed(paths.processed)
+        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
         result.timings["read_dataset"] = time.perf_counter() - t0
     if dataset is not None:
         # the identification rule, as fit and validate apply it, for the later stages

@@ -176,6 +176,30 @@ def config_rows(dataset: pd.DataFrame, config: Configuration) -> pd.DataFrame:
     return dataset.loc[mask]
 
 
+class ConfigurationRows:
+    """The samples of each configuration, located in one pass over the dataset.
+
+    :func:`config_rows` compares every row of the dataset for each configuration, so a stage
+    calling it per configuration grows with the square of the map's size; this keeps only
+    the row positions of each configuration (no copy of the data) and takes its rows on
+    demand.
+    """
+
+    def __init__(self, dataset: pd.DataFrame) -> None:
+        self.dataset = dataset
+        groups = dataset.groupby(list(CONFIG_COLUMNS), sort=False, dropna=False,
+                                 observed=True).indices
+        self._positions = {Configuration(str(k[0]), _num(k[1]), _num(k[2])): v
+                           for k, v in groups.items()}
+
+    def rows(self, config: Configuration) -> pd.DataFrame:
+        """What ``config_rows(dataset, config)`` returns."""
+        positions = self._positions.get(config)
+        if positions is None:  # a value that matches only within config_rows' tolerance
+            return config_rows(self.dataset, config)
+        return self.dataset.iloc[positions]
+
+
 @dataclass(frozen=True)
 class RunSignal:
     """The input/output of one run, time-ordered, with a hash of exactly these values."""
@@ -306,38 +330,44 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
     chosen = set(map(str, fit_runs))
     all_marked: set[str] = set()
     notes: dict[str, str] = {}
-    pieces: list[pd.DataFrame] = []
     keys = ["rig", "curve_angle_deg", "radius_mm"]
-    for key, rows in dataset.groupby(keys, sort=True, dropna=False, observed=True):
-        label = Configuration(str(key[0]), _num(key[1]), _num(key[2])).label
-        by_run = {str(r): g for r, g in rows.groupby("run_id", sort=True, observed=True)}
+    # The decisions need each run's excitation only: one row per run, not the samples (a
+    # copy of every configuration's rows, then of them all, cost three datasets of memory).
+    run_kinds = dataset.groupby([*keys, "run_id"], sort=True, dropna=False,
+                                observed=True)["excitation"].first()
+    splits: dict[Configuration, tuple[pd.DataFrame, pd.DataFrame]] = {}
+    located: ConfigurationRows | None = None
+    for key, kinds in _by_configuration(run_kinds):
+        config = Configuration(str(key[0]), _num(key[1]), _num(key[2]))
+        label = config.label
+        by_run = {str(r): str(k) for r, k in kinds}
         marked = [r for r in by_run if roles.get(r) == IDENTIFICATION]
         if marked:
             chosen.update(marked)
             all_marked.update(marked)
             for r in marked:
-                kind = str(by_run[r]["excitation"].iloc[0])
+                kind = by_run[r]
                 if kind not in fit_kinds:
                     fit_kinds.append(kind)
             notes[label] = f"manifest role identify: {', '.join(marked)}"
-            pieces.append(rows)
             continue
         usable = [r for r in by_run if roles.get(r) != HELDOUT]
-        has_kind = any(str(by_run[r]["excitation"].iloc[0]) in configured for r in usable)
+        has_kind = any(by_run[r] in configured for r in usable)
         if has_kind or len(by_run) != 1 or not usable or chosen.intersection(by_run):
-            pieces.append(rows)
             continue
-        (run_id, run), = by_run.items()
+        (run_id, _), = by_run.items()
+        located = located or ConfigurationRows(dataset)
+        rows = located.rows(config)
+        run = rows[rows["run_id"].astype(str) == run_id]
         run = run.sort_values("t_s", kind="stable")
         kind = str(run["excitation"].iloc[0])
         cut = tail_start(len(run), single_run_heldout_fraction)
         if cut is None:
-            pieces.append(rows)
             continue
         head, tail = run.iloc[:cut].copy(), run.iloc[cut:].copy()
         tail["run_id"] = run_id + TAIL
         tail["excitation"] = kind + TAIL
-        pieces += [head, tail]
+        splits[config] = (head, tail)
         if kind not in fit_kinds:
             fit_kinds.append(kind)
         if kind + TAIL not in held_kinds:
@@ -345,13 +375,38 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
         t = run["t_s"].to_numpy(dtype=np.float64)
         notes[label] = split_note(str(run_id), t[cut] - t[0], t[-1] - t[cut],
                                   single_run_heldout_fraction, kind + TAIL)
-    out = pd.concat(pieces, ignore_index=True) if pieces else dataset
+    if splits:
+        pieces: list[pd.DataFrame] = []
+        for key, rows in dataset.groupby(keys, sort=True, dropna=False, observed=True):
+            split = splits.get(Configuration(str(key[0]), _num(key[1]), _num(key[2])))
+            pieces += list(split) if split is not None else [rows]
+        out = pd.concat(pieces, ignore_index=True)
+    else:  # nothing split: the dataset itself (copy-on-write: no copy of its data)
+        out = dataset.reset_index(drop=True)
     for col in ("run_id", "excitation"):
         if isinstance(dataset[col].dtype, pd.CategoricalDtype):
             out[col] = out[col].astype(str)
     out = _held_out_by_role(out, roles, fit_kinds, held_kinds)
     return IdentificationPlan(out, tuple(fit_kinds), tuple(held_kinds), frozenset(chosen),
                               notes, frozenset(all_marked))
+
+
+def _by_configuration(run_kinds: pd.Series) -> Iterable[tuple[tuple[Any, ...],
+                                                                 list[tuple[Any, Any]]]]:
+    """``(configuration key, [(run_id, excitation), ...])`` from a Series indexed by
+    (rig, curve angle, radius, run id) in sorted order, one configuration at a time."""
+    current: tuple[Any, ...] | None = None
+    same: tuple[Any, ...] | None = None
+    runs: list[tuple[Any, Any]] = []
+    for (rig, phi, r, run_id), kind in run_kinds.items():
+        ident = (str(rig), _num(phi), _num(r))  # NaN equals NaN here
+        if ident != same:
+            if current is not None:
+                yield current, runs
+            current, same, runs = (rig, phi, r), ident, []
+        runs.append((run_id, kind))
+    if current is not None:
+        yield current, runs
 
 
 #: Suffix of a held-out run's excitation when runs of the same kind also identify.
@@ -452,8 +507,9 @@ def plan_fits(
     chosen = set(map(str, fit_runs))
     too_long: list[str] = []
     tasks: list[FitTask] = []
+    located = ConfigurationRows(dataset)
     for config in configs:
-        by_kind = run_signals(config_rows(dataset, config), input_col=input_col,
+        by_kind = run_signals(located.rows(config), input_col=input_col,
                               output_col=output_col)
         own = {r.run_id for rs in by_kind.values() for r in rs} & set(marked)
         for kind in fit_excitations:

@@ -34,7 +34,11 @@ import numpy as np
 import pandas as pd
 
 from hysteresis.base import HysteresisModel, family_class
-from hysteresis.shape_aware import ShapeAwareModel, refit_on_common_structure
+from hysteresis.shape_aware import (
+    ShapeAwareModel,
+    leave_one_out_models,
+    refit_on_common_structure,
+)
 from pipelines import cache, schemas, stages
 from pipelines.common import (
     Paths,
@@ -43,6 +47,7 @@ from pipelines.common import (
     hydra_sweep_dir,
     read_processed,
     run_stage,
+    stage_columns,
     to_container,
 )
 from pipelines.stages import Configuration, PipelineError, RunSignal
@@ -103,24 +108,48 @@ def leave_one_out(family: str, configs: Sequence[Configuration],
     """
     rows: list[dict[str, Any]] = []
     shapes = [(float(c.curve_angle_deg or 0.0), float(c.radius_mm or 0.0)) for c in configs]
+    n = len(configs)
     memo: dict[tuple[Any, str], HysteresisModel] = {}
+    sse_memo: dict[tuple[Any, str], float] = {}
 
-    def training(others: Sequence[int]) -> list[HysteresisModel]:
+    def training(others: Sequence[int]) -> tuple[list[HysteresisModel], str | None]:
+        """The fold's training models and the common structure they were refitted on."""
         train = [models[j] for j in others]
         if records is None or any(records[j] is None for j in others):
-            return train
-        refits, _ = refit_on_common_structure(
-            train, [records[j] for j in others], keys=others, memo=memo)  # type: ignore[misc]
-        return refits
+            return train, None
+        refits, cand = refit_on_common_structure(
+            train, [records[j] for j in others], keys=others,  # type: ignore[misc]
+            memo=memo, sse_memo=sse_memo)
+        return refits, (json.dumps(cand, sort_keys=True) if cand else None)
+
+    folds = [[j for j in range(n) if j != i] for i in range(n)]
+    trained = [training(others) for others in folds]
+    # Folds learning from the same kind of models (the fit stage's, or refits on one common
+    # structure) are one regression with one row left out each: solved once for all of them.
+    closed: dict[int, tuple[HysteresisModel, int]] = {}
+    for tag in dict.fromkeys(t for _, t in trained):
+        members = [i for i in range(n) if trained[i][1] == tag]
+        if len(members) < 2:
+            continue
+        full = list(models) if tag is None else _refits_on(tag, models, records, memo)
+        solved = leave_one_out_models(shapes, full, base_family=family, **dict(estimator))
+        closed.update({i: solved[i] for i in members if solved[i] is not None})  # type: ignore[misc]
 
     for i, config in enumerate(configs):
-        others = [j for j in range(len(configs)) if j != i]
-        sa = ShapeAwareModel(base_family=family, **dict(estimator))
-        sa.fit([shapes[j] for j in others], training(others))
+        others = folds[i]
         phi, r = shapes[i]
+        if i in closed:
+            model_i, near = closed[i]
+            offered = {"own": models[i], "nearest": models[near], "shape_aware": model_i}
+        else:  # a fold the closed form does not cover: fitted on its own
+            sa = ShapeAwareModel(base_family=family, **dict(estimator))
+            sa.fit([shapes[j] for j in others], trained[i][0])
+            offered = {}
         for name in PREDICTORS:
             try:
-                value = _rmse(_predictor(name, i, others, models, sa, phi, r), runs[config.label])
+                model = (offered[name] if offered
+                         else _predictor(name, i, others, models, sa, phi, r))
+                value = _rmse(model, runs[config.label])
             except Exception as exc:  # noqa: BLE001 - one bad prediction must not stop the rest
                 log.warning("unseen_shape: %s %s %s: %s: %s", family, config.label, name,
                             type(exc).__name__, exc)
@@ -128,6 +157,24 @@ def leave_one_out(family: str, configs: Sequence[Configuration],
             rows.append({"family": family, "curve_angle_deg": phi, "radius_mm": r,
                          "predictor": name, "rmse": value})
     return rows
+
+
+def _refits_on(tag: str, models: Sequence[HysteresisModel],
+               records: Sequence[tuple[np.ndarray, np.ndarray] | None] | None,
+               memo: dict[tuple[Any, str], HysteresisModel]) -> list[HysteresisModel]:
+    """Every configuration's model refitted on the structure ``tag`` (from ``memo`` where a
+    fold already fitted it)."""
+    assert records is not None
+    cand = json.loads(tag)
+    out = []
+    for j, model in enumerate(models):
+        if (j, tag) not in memo:
+            u, y = records[j]  # type: ignore[misc]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                memo[(j, tag)] = type(model)(**{**model.get_params(), **cand}).fit(u, y)
+        out.append(memo[(j, tag)])
+    return out
 
 
 def _predictor(name: str, i: int, others: Sequence[int], models: Sequence[HysteresisModel],
@@ -215,7 +262,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     cfg = schemas.with_defaults(schemas.UnseenShapeConfig, cfg)
     paths = Paths.from_config(cfg["paths"])
     if dataset is None:
-        dataset = read_processed(paths.processed)
+        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
     input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
     stages.check_dataset(dataset, signals=(input_col, output_col))
     sel = cfg["config"]
@@ -251,8 +298,9 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
 
     runs: dict[str, list[RunSignal]] = {}
     signals: dict[str, dict[str, list[RunSignal]]] = {}
+    located = stages.ConfigurationRows(dataset)
     for c in configs:
-        by_kind = stages.run_signals(stages.config_rows(dataset, c), input_col=input_col,
+        by_kind = stages.run_signals(located.rows(c), input_col=input_col,
                                      output_col=output_col)
         signals[c.label] = by_kind
         kinds = eval_kinds or sorted(k for k in by_kind if k != fit_exc)

@@ -38,6 +38,7 @@ from pipelines.common import (
     identification_plan,
     read_processed,
     run_stage,
+    stage_columns,
     to_container,
 )
 from pipelines.stages import Configuration, RunSignal
@@ -92,7 +93,7 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     clean_leftovers(paths.predictions)  # temporaries of a killed validate
     clean_leftovers(paths.reports, recursive=False)
     if dataset is None:
-        dataset = read_processed(paths.processed)
+        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
     plan = identification_plan(cfg, dataset, paths)
     dataset = plan.dataset
     input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
@@ -121,13 +122,14 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     errors: list[str] = []
     todo: list[tuple[pd.DataFrame, dict[str, list[RunSignal]], str, Path, Configuration]] = []
     by_label = {c.label: c for c in configs}
+    located = stages.ConfigurationRows(dataset)
     for label, group in fits.groupby(
         fits.apply(lambda r: Configuration(str(r["rig"]), stages._num(r["curve_angle_deg"]),
                                            stages._num(r["radius_mm"])).label, axis=1),
         sort=True,
     ):
         config = by_label[str(label)]
-        signals = stages.run_signals(stages.config_rows(dataset, config), input_col=input_col,
+        signals = stages.run_signals(located.rows(config), input_col=input_col,
                                      output_col=output_col)
         key = stages.validation_key(group, signals, settings)
         path = prediction_path(paths.predictions, config)

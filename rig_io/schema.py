@@ -85,10 +85,29 @@ SCHEMA = pa.DataFrameSchema(
 )
 
 
-def validate(df: pd.DataFrame, *, where: str, run: str | None = None) -> pd.DataFrame:
-    """Validate ``df`` against :data:`SCHEMA`; a failure is a :class:`RigIOError`."""
+#: The columns each of :data:`SCHEMA`'s whole-frame checks reads, in its order.
+_FRAME_CHECK_COLUMNS = (("run_id", "t_s"), ("run_id", "input_norm"), ("run_id", "t_s", "input"))
+
+
+@cache
+def schema_for(columns: tuple[str, ...]) -> pa.DataFrameSchema:
+    """:data:`SCHEMA` for a dataset read with only ``columns`` (in :data:`COLUMNS` order): their
+    column checks and the whole-frame checks that read nothing else."""
+    if columns == COLUMNS:
+        return SCHEMA
+    checks = [check for check, needs in zip(SCHEMA.checks, _FRAME_CHECK_COLUMNS, strict=True)
+              if set(needs) <= set(columns)]
+    return pa.DataFrameSchema({c: SCHEMA.columns[c] for c in columns}, checks=checks,
+                              strict=True, ordered=True)
+
+
+def validate(df: pd.DataFrame, *, where: str, run: str | None = None,
+             columns: tuple[str, ...] = COLUMNS, inplace: bool = False) -> pd.DataFrame:
+    """Validate ``df`` against :data:`SCHEMA` (restricted to ``columns`` when only those were
+    read); a failure is a :class:`RigIOError`. ``inplace``: coerce ``df`` itself instead of
+    a copy (a frame nobody else holds, just read)."""
     try:
-        return SCHEMA.validate(df, lazy=True)
+        return schema_for(tuple(columns)).validate(df, lazy=True, inplace=inplace)
     except (pa.errors.SchemaErrors, pa.errors.SchemaError) as err:
         summary = str(err).strip().splitlines()
         text = "; ".join(line.strip() for line in summary[:12] if line.strip())

@@ -8,7 +8,12 @@ import pytest
 from hysteresis.base import HysteresisError, HysteresisModel
 from hysteresis.gamma import GammaModel
 from hysteresis.linear import LinearModel
-from hysteresis.shape_aware import ShapeAwareModel, refit_on_common_structure, shape_features
+from hysteresis.shape_aware import (
+    ShapeAwareModel,
+    leave_one_out_models,
+    refit_on_common_structure,
+    shape_features,
+)
 
 ANGLES = (15.0, 30.0, 45.0, 60.0, 75.0, 90.0)
 RADII = (30.0, 45.0, 60.0, 75.0)
@@ -176,3 +181,63 @@ def test_not_a_registered_family() -> None:
     assert "shape_aware" not in family_names()
     assert ShapeAwareModel.family == "shape_aware"
     assert HysteresisModel.family == "base"
+
+
+def _explicit_fold(shapes: list[tuple[float, float]], models: list[GammaModel], i: int,
+                   **params: object) -> tuple[HysteresisModel, int]:
+    others = [j for j in range(len(shapes)) if j != i]
+    sa = ShapeAwareModel(base_family="gamma", **params).fit(  # type: ignore[arg-type]
+        [shapes[j] for j in others], [models[j] for j in others])
+    return sa.model_for(*shapes[i]), others[sa.nearest_index(*shapes[i])]
+
+
+@pytest.mark.parametrize("params", [{}, {"ridge": 0.0}, {"angle_degree": 2, "ridge": 0.1}])
+@pytest.mark.parametrize("extra", [
+    # an extreme angle alone (without it the feature scaling moves: left to the caller),
+    # and an angle and a radius alone inside the range (the same regression: solved)
+    ((100.0, 50.0), (52.5, 40.0)),
+    # an angle alone among two others (without it the angle degree drops: left to the caller)
+    ((52.5, 40.0),)])
+def test_closed_form_leave_one_out_equals_refitting_every_fold(
+        params: dict, extra: tuple[tuple[float, float], ...]) -> None:
+    angles = ANGLES if len(extra) == 2 else (15.0, 90.0)
+    shapes = [(p, r) for p in angles for r in RADII] + list(extra)
+    models = [_gamma(*s) for s in shapes]
+    for k, m in enumerate(models):  # an attribute equal everywhere but on one shape
+        m.sse_ = 0.5 if k == 3 else 0.0
+    solved = leave_one_out_models(shapes, models, base_family="gamma", **params)
+    left = {len(shapes) - 2} if len(extra) == 2 else {len(shapes) - 1}
+    if params.get("ridge") == 0.0 and len(extra) == 1:
+        # one shape at the middle angle cannot separate its angle terms: without a ridge the
+        # regression is rank-deficient (least squares picks the smallest coefficients), so
+        # every fold is left to the caller
+        left = set(range(len(shapes)))
+    assert {i for i, s in enumerate(solved) if s is None} == left
+    for i, got in enumerate(solved):
+        if got is None:
+            continue
+        want, near = _explicit_fold(shapes, models, i, **params)
+        assert got[1] == near
+        for name, value in want.fitted_attributes().items():
+            np.testing.assert_allclose(getattr(got[0], name), value, rtol=1e-9, atol=1e-12,
+                                       err_msg=f"fold {i} {name}")
+
+
+def test_closed_form_leave_one_out_with_one_odd_value() -> None:
+    # one shape's offset is not finite: only the fold leaving it out regresses the offset
+    shapes = [(p, r) for p in ANGLES for r in RADII]
+    models = [_gamma(*s) for s in shapes]
+    models[5].offset_ = float("nan")
+    solved = leave_one_out_models(shapes, models, base_family="gamma")
+    assert [i for i, s in enumerate(solved) if s is None] == [5]
+    for i, got in enumerate(solved):
+        if got is not None:
+            want, _ = _explicit_fold(shapes, models, i)
+            np.testing.assert_allclose(got[0].offset_, want.offset_, rtol=1e-9)
+            np.testing.assert_allclose(got[0].weights_, want.weights_, rtol=1e-9, atol=1e-12)
+
+
+def test_closed_form_leave_one_out_leaves_rbf_to_the_caller() -> None:
+    shapes = [(p, r) for p in ANGLES for r in RADII]
+    assert leave_one_out_models(shapes, [_gamma(*s) for s in shapes], base_family="gamma",
+                                method="rbf") == [None] * len(shapes)

@@ -127,3 +127,20 @@ def test_the_report_shows_the_summary(fitted: tuple[Path, pd.DataFrame, pd.DataF
     unseen_shape.run(_cfg(root, families=["gamma"]), dataset=data, fits=fits)
     again = report_stage.run(rcfg)
     assert not again.cached and again.key != first.key
+
+
+def test_closed_form_folds_equal_refitting_every_fold(
+        fitted: tuple[Path, pd.DataFrame, pd.DataFrame], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    _, data, fits = fitted
+    fast = unseen_shape.run(_cfg(tmp_path / "fast", plot=False), dataset=data, fits=fits)
+    solved: list[int] = []
+
+    def refit_every_fold(shapes: object, models: list[object], **params: object) -> list[None]:
+        solved.append(len(models))
+        return [None] * len(models)
+
+    monkeypatch.setattr(unseen_shape, "leave_one_out_models", refit_every_fold)
+    slow = unseen_shape.run(_cfg(tmp_path / "slow", plot=False), dataset=data, fits=fits)
+    assert solved == [12, 12]  # one regression per family, not one per fold
+    pd.testing.assert_frame_equal(fast.table, slow.table, check_exact=False, rtol=1e-7)
