@@ -274,28 +274,42 @@ def main_cfg(cfg: Any) -> pd.DataFrame:
     dataset = read_processed(paths.processed)
     fits = run(plain, dataset=dataset)
     if tracker.enabled:
-        with tracking.StageRun(tracker, "fit", sweep_dir=hydra_sweep_dir(),
-                                start_time=started) as stage_run:
-            assert stage_run.parent_id is not None
-            base = tracking.flatten({k: v for k, v in plain.items()
-                                     if k not in ("family", "family_overrides", "tracking")})
-            hydra_dir = hydra_output_dir()
-            plan = identification_plan(plain, dataset, paths)
-            if plan.notes:
-                tracker.log_text(stage_run.parent_id, json.dumps(dict(plan.notes), indent=1),
-                                 "identification_plan.json")
-            ids = tracking.log_model_runs(
-                tracker, stage_run.parent_id, fits=fits,
-                metrics=fit_metrics(fits, plan.dataset, plain), base_params=base,
-                tags={"dataset_hash": dataset_hash(paths.processed)},
-                hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, stage="fit",
-                units=dataset_units(paths.processed),
-            )
-            from pipelines import lineage
-
-            lineage.log_model_inputs(tracker, ids, fits, None, processed=paths.processed,
-                                     dataset=dataset)
+        # a model this store already holds (same key: data, config and code) is not logged
+        # again: a re-run that changes nothing adds no run
+        fresh = fits[~fits["key"].astype(str).isin(tracker.logged_model_keys("fit"))]
+        if fresh.empty:
+            log.info("fit: every model is already in the MLflow store; nothing new logged")
+            return fits
+        _track_fits(tracker, plain, paths, dataset, fresh, started)
     return fits
+
+
+def _track_fits(tracker: Any, plain: dict[str, Any], paths: Paths, dataset: pd.DataFrame,
+                fits: pd.DataFrame, started: float) -> None:
+    """The stage's parent run and one child run per model in ``fits``."""
+    from pipelines import tracking
+
+    with tracking.StageRun(tracker, "fit", sweep_dir=hydra_sweep_dir(),
+                            start_time=started) as stage_run:
+        assert stage_run.parent_id is not None
+        base = tracking.flatten({k: v for k, v in plain.items()
+                                 if k not in ("family", "family_overrides", "tracking")})
+        hydra_dir = hydra_output_dir()
+        plan = identification_plan(plain, dataset, paths)
+        if plan.notes:
+            tracker.log_text(stage_run.parent_id, json.dumps(dict(plan.notes), indent=1),
+                             "identification_plan.json")
+        ids = tracking.log_model_runs(
+            tracker, stage_run.parent_id, fits=fits,
+            metrics=fit_metrics(fits, plan.dataset, plain), base_params=base,
+            tags={"dataset_hash": dataset_hash(paths.processed)},
+            hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, stage="fit",
+            units=dataset_units(paths.processed),
+        )
+        from pipelines import lineage
+
+        lineage.log_model_inputs(tracker, ids, fits, None, processed=paths.processed,
+                                 dataset=dataset)
 
 
 @hydra.main(config_path="../conf", config_name="fit", version_base="1.3")

@@ -9,9 +9,10 @@ Every stage runs in this process through its Hydra-free function (``run_generate
 config (``conf/generate.yaml``, ``conf/ingest.yaml``, ``conf/fit.yaml`` ...) plus
 ``overrides.<stage>`` and the shared values of ``conf/pipeline.yaml`` (paths first). Every
 stage skips what its content hashes say is unchanged. MLflow: one parent run per invocation
-and a child run per (family, configuration); when nothing changed at all, the parent run
-only points at the run that already holds the identical results (``same_as`` tag) instead
-of logging 120 copies.
+and a child run per (family, configuration); when nothing changed at all, nothing new is
+logged (the log names the run that already holds the identical results); when only the
+report or the shape study changed, one parent run points at that run (``same_as`` tag) and
+holds the new files instead of 120 copies of the models.
 Per-stage wall times go to ``${paths.reports}/pipeline_timing.json`` and the parent run.
 """
 
@@ -347,7 +348,16 @@ def _run_stages(cfg: Mapping[str, Any], paths: Paths, tracker: Any, result: Pipe
             t0 = time.perf_counter()
             state.stage = "tracking"
             tracking_state = pending.result()
-            _track_finish(tracker, tracking_state, result)
+            if tracking_state.parent is None and _outputs_changed(result):
+                tracking_state.parent = _open_parent(
+                    tracker, cfg, paths, result, state, started,
+                    tags={"up_to_date": "true", "same_as": tracking_state.same_as})
+            if tracking_state.parent is not None:
+                _track_finish(tracker, tracking_state, result)
+            else:
+                log.info("tracking: nothing changed since MLflow run %s (same data, models, "
+                         "metrics, report and shape study): nothing new logged",
+                         tracking_state.same_as)
             result.parent_run_id = tracking_state.parent
             result.up_to_date = tracking_state.up_to_date
             # time spent on MLflow beyond the stages it overlapped with
@@ -375,17 +385,27 @@ def _run_stages(cfg: Mapping[str, Any], paths: Paths, tracker: Any, result: Pipe
 
 @dataclass
 class TrackState:
-    parent: str
+    #: the parent run; None while nothing changed since ``same_as`` (nothing is logged)
+    parent: str | None
     up_to_date: bool
     #: child run ids with the configuration label each one shows
     children: list[tuple[str, str]] = field(default_factory=list)
     seconds: float = 0.0
+    #: the run that already holds these results, when nothing changed
+    same_as: str = ""
+
+
+def _outputs_changed(result: PipelineResult) -> bool:
+    """Whether the report or the shape study was made anew (the models and metrics being
+    the same as an earlier run's): their files then need a run to live on."""
+    return any(r is not None and not r.cached for r in (result.report, result.unseen_shape))
 
 
 def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any],
                  paths: Paths, result: PipelineResult, progress: _Progress,
                  started: float | None = None) -> TrackState:
-    """Parent run + one child per fitted model; or, when nothing changed, a pointer run.
+    """Parent run + one child per fitted model; nothing when nothing changed (``same_as``
+    names the run that holds the same results).
     ``started`` (epoch seconds): when the pipeline began, the parent run's start time."""
     from pipelines import lineage, tracking
     from pipelines.common import dataset_units
@@ -402,32 +422,15 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
     tags = {"dataset_hash": data_hash, "pipeline_key": key}
     if result.ingest_report is not None:
         tags["ingest_rejected"] = str(result.ingest_report.get("n_rejected", 0))
-    params = tracking.flatten({k: v for k, v in cfg.items() if k != "tracking"})
     previous = tracker.find_runs(
         f"tags.pipeline_key = '{key}' and tags.complete = 'true'")
-    units = dataset_units(paths.processed)
-    parent = tracker.start_run("pipeline", tags={"stage": "pipeline", "kind": "parent",
-                                                 **tags},
-                               note=_pipeline_note(cfg, fits, paths), start_time=started)
-    progress.parent = parent  # from here on a failure anywhere ends this run FAILED
-    tracker.log(parent, params=params)
-    if paths.processed.is_dir():  # the unseen-shape study and the report read all of it
-        lineage.log_input(tracker, [parent],
-                          lineage.processed_input(paths.processed, context="evaluation"))
-        # what ingest did to every run (calibration, offsets, rejections)
-        for name in ("runs.json", "ingest_report.json"):
-            if (paths.processed / name).is_file():
-                tracker.log_artifact(parent, paths.processed / name, "ingest")
-    if metrics is not None:
-        tracker.log_table(parent, metrics, "tables/metrics.json")
-        tracker.log_artifact(parent, paths.metrics_csv, "tables")
-    hydra_dir = hydra_output_dir()
-    if hydra_dir is not None:
-        tracker.log_artifact(parent, hydra_dir / ".hydra", ".hydra")
-    if previous:
-        tracker.log(parent, tags={"up_to_date": "true", "same_as": previous[0].info.run_id})
-        return TrackState(parent, True, seconds=time.perf_counter() - start)
+    if previous:  # nothing new to log, unless the report or the shape study changed
+        return TrackState(None, True, seconds=time.perf_counter() - start,
+                          same_as=previous[0].info.run_id)
+    parent = _open_parent(tracker, cfg, paths, result, progress, started, tags=tags)
     state = TrackState(parent, False)
+    units = dataset_units(paths.processed)
+    hydra_dir = hydra_output_dir()
     if fits is not None:
         base = tracking.flatten({k: v for k, v in fit_cfg.items()
                                  if k not in ("family", "family_overrides", "tracking",
@@ -444,6 +447,36 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
         state.children = list(zip(ids, labels, strict=True))
     state.seconds = time.perf_counter() - start
     return state
+
+
+def _open_parent(tracker: Any, cfg: Mapping[str, Any], paths: Paths, result: PipelineResult,
+                 progress: _Progress, started: float | None, *,
+                 tags: Mapping[str, str]) -> str:
+    """The pipeline's parent run, started at ``started``, with its params, data and tables."""
+    from pipelines import lineage, tracking
+
+    fits, metrics = result.fits, result.metrics
+    data_hash = dataset_hash(paths.processed)
+    params = tracking.flatten({k: v for k, v in cfg.items() if k != "tracking"})
+    parent = tracker.start_run("pipeline", tags={"stage": "pipeline", "kind": "parent",
+                                                 "dataset_hash": data_hash, **tags},
+                               note=_pipeline_note(cfg, fits, paths), start_time=started)
+    progress.parent = parent  # from here on a failure anywhere ends this run FAILED
+    tracker.log(parent, params=params)
+    if paths.processed.is_dir():  # the unseen-shape study and the report read all of it
+        lineage.log_input(tracker, [parent],
+                          lineage.processed_input(paths.processed, context="evaluation"))
+        # what ingest did to every run (calibration, offsets, rejections)
+        for name in ("runs.json", "ingest_report.json"):
+            if (paths.processed / name).is_file():
+                tracker.log_artifact(parent, paths.processed / name, "ingest")
+    if metrics is not None:
+        tracker.log_table(parent, metrics, "tables/metrics.json")
+        tracker.log_artifact(parent, paths.metrics_csv, "tables")
+    hydra_dir = hydra_output_dir()
+    if hydra_dir is not None:
+        tracker.log_artifact(parent, hydra_dir / ".hydra", ".hydra")
+    return str(parent)
 
 
 def _pipeline_note(cfg: Mapping[str, Any], fits: pd.DataFrame | None, paths: Paths) -> str:
@@ -464,6 +497,8 @@ def _track_finish(tracker: Any, state: TrackState, result: PipelineResult) -> No
     from pipelines import report as report_mod
     from pipelines import unseen_shape
 
+    if state.parent is None:
+        return
     if result.unseen_shape is not None:
         unseen_shape.log_result(tracker, state.parent, result.unseen_shape)
     rep = result.report

@@ -371,6 +371,13 @@ class Tracker:
                           filter_string=f"tags.mlflow.parentRunId = '{parent_id}'",
                           max_results=5000))
 
+    def logged_model_keys(self, stage: str) -> set[str]:
+        """The ``model_key`` of every finished model run ``stage`` logged in this store: a
+        fit found here again (same data, config and code) needs no new run."""
+        runs = self.find_runs(f"tags.stage = '{stage}' and tags.kind = 'model' and "
+                              "attributes.status = 'FINISHED'", max_results=50_000)
+        return {str(r.data.tags["model_key"]) for r in runs if "model_key" in r.data.tags}
+
     def find_runs(self, filter_string: str, *, max_results: int = 1) -> list[Any]:
         return list(retry(self.client.search_runs, [self.experiment_id],
                           filter_string=filter_string, max_results=max_results,

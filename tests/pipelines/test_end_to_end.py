@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 from mlflow import MlflowClient
+from mlflow.entities import ViewType
 
 from pipelines.run_all import compose_stage, run_pipeline
 from tests.pipelines.pipeline_data import mlflow_store
@@ -81,7 +82,15 @@ def test_small_pipeline_end_to_end_and_incremental_rerun(tmp_path: Path) -> None
     assert second.up_to_date
     assert second.fits is not None and second.fits["cached"].all()
     assert second.report is not None and second.report.cached
-    again = client.get_run(second.parent_run_id)
-    assert again.data.tags["same_as"] == first.parent_run_id
-    assert len(client.search_runs([exp.experiment_id])) == 6  # one pointer run, no copies
+    # nothing changed: nothing new is logged (no pointer run, no copies)
+    assert second.parent_run_id is None
+    assert len(client.search_runs([exp.experiment_id])) == 5
+    assert len(client.search_runs([exp.experiment_id], run_view_type=ViewType.ALL)) == 5
+    # only the report is made anew: one parent run holds it and points at the models' run
+    (reports / "report.html").unlink()
+    third = run_pipeline(cfg)
+    assert third.report is not None and not third.report.cached
+    pointer = client.get_run(third.parent_run_id)
+    assert pointer.data.tags["same_as"] == first.parent_run_id
+    assert len(client.search_runs([exp.experiment_id])) == 6
     pd.testing.assert_frame_equal(pd.read_parquet(reports / "metrics.parquet"), metrics)

@@ -53,3 +53,23 @@ def test_sixteen_job_sweep_lands_under_one_parent(tmp_path: Path) -> None:
     assert len(list((tmp_path / "data/interim/models/linear").glob("*.json"))) == 16
     arts = {a.path for a in client.list_artifacts(children[0].info.run_id)}
     assert ".hydra" in arts and "model" in arts
+
+
+def test_a_fit_that_changes_nothing_logs_nothing_new(tmp_path: Path) -> None:
+    write_dataset(make_dataset(angles=(15, 90), radii=(30,), dt=0.25, periods=1,
+                               kinds=("sine_decay",)), tmp_path)
+    mlflow_store(tmp_path)
+    cmd = [sys.executable, "-m", "pipelines.fit", "families=[linear]", f"paths.root={tmp_path}",
+           f"hydra.run.dir={tmp_path / 'outputs'}", "progress=false"]
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    env.pop("TSM_MLFLOW_PARENT_RUN_ID", None)
+    client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
+    counts = []
+    for _ in range(2):
+        proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True,
+                              timeout=600)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        exp = client.get_experiment_by_name("tsm-hysteresis")
+        counts.append(len(client.search_runs([exp.experiment_id], max_results=1000)))
+    assert counts == [3, 3]  # one parent and two models, then nothing
+    assert "nothing new logged" in proc.stdout + proc.stderr
