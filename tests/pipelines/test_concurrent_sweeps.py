@@ -22,17 +22,18 @@ from tests.pipelines.pipeline_data import make_dataset, write_dataset
 @pytest.mark.slow
 def test_two_sweeps_started_together_never_share_a_folder_or_race_the_store(
         tmp_path: Path) -> None:
-    write_dataset(make_dataset(angles=(15, 90), radii=(30,), dt=0.25, periods=1,
+    write_dataset(make_dataset(angles=(15, 30, 60, 90), radii=(30,), dt=0.25, periods=1,
                                kinds=("sine_decay",)), tmp_path)
     assert not (tmp_path / "mlflow.db").exists()  # both processes find no store
-    cmd = [sys.executable, "-m", "pipelines.fit", "-m", "families=[linear]",
-           "config.curve_angle_deg=15,90", f"paths.root={tmp_path}", "progress=false",
-           "hydra/launcher=basic"]
+    # two sweeps over different shapes (a sweep identical to one already logged logs nothing)
+    cmds = [[sys.executable, "-m", "pipelines.fit", "-m", "families=[linear]",
+             f"config.curve_angle_deg={angles}", f"paths.root={tmp_path}", "progress=false",
+             "hydra/launcher=basic"] for angles in ("15,90", "30,60")]
     env = {**os.environ, "HYDRA_FULL_ERROR": "1", "MPLBACKEND": "Agg"}
     for var in ("TSM_MLFLOW_PARENT_RUN_ID", "TSM_SWEEP_ID"):
         env.pop(var, None)
     procs = [subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
+                              stderr=subprocess.PIPE, text=True) for cmd in cmds]
     for p in procs:
         _, err = p.communicate(timeout=300)
         assert p.returncode == 0, err[-3000:]
