@@ -12,9 +12,11 @@ needs the team venv.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +69,25 @@ def _browser(pw: Any) -> Any:
                               args=["--no-sandbox", "--disable-gpu"])
 
 
+@contextlib.contextmanager
+def _ui_page(uri: str, cwd: Path, log_name: str) -> Iterator[tuple[Any, str]]:
+    """The MLflow UI on ``uri`` (a free loopback port) and a chromium page on it; afterwards
+    the UI and its workers must be gone."""
+    port = localserv.free_port()
+    url = f"http://{localserv.LOOPBACK}:{port}"
+    cmd = localserv.mlflow_ui_command(sys.executable, uri, port)
+    with localserv.running(cmd, log=cwd / log_name, url=f"{url}/health", timeout=90,
+                           cwd=cwd) as server:
+        pgid = server.pid
+        with sync_api.sync_playwright() as pw:
+            browser = _browser(pw)
+            try:
+                yield browser.new_page(viewport={"width": 1600, "height": 1000}), url
+            finally:
+                browser.close()
+    assert localserv.group_alive(pgid) == []  # the UI and its workers are gone
+
+
 def test_ui_lists_the_pipelines_runs_and_a_run_page_shows_heldout_rmse(
         pipeline_store: Path) -> None:
     tmp_path = pipeline_store
@@ -80,45 +101,33 @@ def test_ui_lists_the_pipelines_runs_and_a_run_page_shows_heldout_rmse(
     dataset = child.inputs.dataset_inputs[0].dataset
     assert exp.tags["mlflow.experimentKind"] == "custom_model_development"
 
-    port = localserv.free_port()
-    url = f"http://{localserv.LOOPBACK}:{port}"
     SHOTS.mkdir(parents=True, exist_ok=True)
-    cmd = localserv.mlflow_ui_command(sys.executable, f"sqlite:///{tmp_path}/mlflow.db", port)
-    with localserv.running(cmd, log=tmp_path / "ui.log", url=f"{url}/health", timeout=90,
-                           cwd=tmp_path) as server:
-        pgid = server.pid
-        with sync_api.sync_playwright() as pw:
-            browser = _browser(pw)
-            try:
-                page = browser.new_page(viewport={"width": 1600, "height": 1000})
-                # the link `make ui` prints: the experiment's runs table (MLflow 3.17's UI
-                # picks GenAI vs model-training pages from its workflowType switch)
-                page.goto(f"{url}/#/experiments/{exp.experiment_id}"
-                          "?workflowType=machine_learning")
-                page.get_by_text("pipeline", exact=True).first.wait_for(timeout=90_000)
-                assert "/runs" in page.url
-                assert page.get_by_text("matching runs").count() >= 1
-                close = page.get_by_role("button", name="Close")
-                if close.count():  # the assistant side panel hides half of the table
-                    close.first.click()
-                # expand the pipeline's parent run: its model runs, each with its dataset
-                page.locator('[data-component-id*="runnamecellrenderer"]').first.click()
-                for run in children:
-                    page.get_by_text(run.info.run_name, exact=True).first.wait_for(
-                        timeout=60_000)
-                page.get_by_text(dataset.name).first.wait_for(timeout=30_000)
-                page.screenshot(path=str(SHOTS / "runs_table.png"))
-                # one run's page: its metrics, heldout.rmse among them
-                page.goto(f"{url}/#/experiments/{exp.experiment_id}/runs/"
-                          f"{child.info.run_id}?workflowType=machine_learning")
-                page.get_by_placeholder("Search metrics").fill("heldout.")
-                page.get_by_text("heldout.rmse", exact=True).first.wait_for(timeout=60_000)
-                value = f"{child.data.metrics['heldout.rmse']}"[:8]
-                assert page.get_by_text(value).count() >= 1  # its value, as logged
-                page.screenshot(path=str(SHOTS / "run_page.png"), full_page=True)
-            finally:
-                browser.close()
-    assert localserv.group_alive(pgid) == []  # the UI and its workers are gone
+    with _ui_page(f"sqlite:///{tmp_path}/mlflow.db", tmp_path, "ui.log") as (page, url):
+        # the link `make ui` prints: the experiment's runs table (MLflow 3.17's UI
+        # picks GenAI vs model-training pages from its workflowType switch)
+        page.goto(f"{url}/#/experiments/{exp.experiment_id}"
+                  "?workflowType=machine_learning")
+        page.get_by_text("pipeline", exact=True).first.wait_for(timeout=90_000)
+        assert "/runs" in page.url
+        assert page.get_by_text("matching runs").count() >= 1
+        close = page.get_by_role("button", name="Close")
+        if close.count():  # the assistant side panel hides half of the table
+            close.first.click()
+        # expand the pipeline's parent run: its model runs, each with its dataset
+        page.locator('[data-component-id*="runnamecellrenderer"]').first.click()
+        for run in children:
+            page.get_by_text(run.info.run_name, exact=True).first.wait_for(
+                timeout=60_000)
+        page.get_by_text(dataset.name).first.wait_for(timeout=30_000)
+        page.screenshot(path=str(SHOTS / "runs_table.png"))
+        # one run's page: its metrics, heldout.rmse among them
+        page.goto(f"{url}/#/experiments/{exp.experiment_id}/runs/"
+                  f"{child.info.run_id}?workflowType=machine_learning")
+        page.get_by_placeholder("Search metrics").fill("heldout.")
+        page.get_by_text("heldout.rmse", exact=True).first.wait_for(timeout=60_000)
+        value = f"{child.data.metrics['heldout.rmse']}"[:8]
+        assert page.get_by_text(value).count() >= 1  # its value, as logged
+        page.screenshot(path=str(SHOTS / "run_page.png"), full_page=True)
     assert (SHOTS / "runs_table.png").stat().st_size > 10_000
     assert (SHOTS / "run_page.png").stat().st_size > 10_000
 
@@ -147,25 +156,13 @@ def test_the_models_tab_lists_one_logged_model_per_configuration(
         run = client.get_run(model.source_run_id)
         assert [o.model_id for o in run.outputs.model_outputs] == [model.model_id]
         assert model.tags["family"] == run.data.tags["family"]
-    port = localserv.free_port()
-    url = f"http://{localserv.LOOPBACK}:{port}"
-    cmd = localserv.mlflow_ui_command(sys.executable, uri, port)
-    with localserv.running(cmd, log=pipeline_store / "ui-models.log", url=f"{url}/health",
-                           timeout=90, cwd=pipeline_store) as server:
-        pgid = server.pid
-        with sync_api.sync_playwright() as pw:
-            browser = _browser(pw)
-            try:
-                page = browser.new_page(viewport={"width": 1600, "height": 1000})
-                page.goto(f"{url}/#/experiments/{exp.experiment_id}/models"
-                          "?workflowType=machine_learning")
-                for model in models:
-                    page.get_by_text(model.name, exact=True).first.wait_for(timeout=90_000)
-                SHOTS.mkdir(parents=True, exist_ok=True)
-                page.screenshot(path=str(SHOTS / "models_tab.png"))
-            finally:
-                browser.close()
-    assert localserv.group_alive(pgid) == []
+    with _ui_page(uri, pipeline_store, "ui-models.log") as (page, url):
+        page.goto(f"{url}/#/experiments/{exp.experiment_id}/models"
+                  "?workflowType=machine_learning")
+        for model in models:
+            page.get_by_text(model.name, exact=True).first.wait_for(timeout=90_000)
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(SHOTS / "models_tab.png"))
 
 
 def test_the_report_reads_as_a_report_in_a_browser(pipeline_store: Path) -> None:
