@@ -66,6 +66,8 @@ class Effect:
     #: last component refined): form -> (side, number of linear coefficients, reads the
     #: base's prediction). The grid search chooses the form with its parameters.
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {}
+    #: The name a form is reported under, where it differs from its tag.
+    labels: ClassVar[dict[str, str]] = {}
 
     def form(self, theta: Any) -> str:
         """The physical form ``theta`` stands for."""
@@ -248,12 +250,15 @@ class TendonElongation(Effect):
     has_theta = True
     n_theta = 3
     first_form = "square_input"
-    #: linear_input: u - c s (T - T(0)) / T_max (a linear spring before the sheath);
-    #: linear_output / square_output: c (T - T(0)) or c (T^2 - T(0)^2) on the reading (a
-    #: compliance after the sheath, at the output's side), T(0) each run's first reading.
+    #: On the reading, in proportion to a tension's rise since the run's first sample:
+    #: linear_input c (T_in - T_in(0)), square_input (T_in^2 - T_in(0)^2) (reported as
+    #: ``square_input``: the same law acting on the output rather than the input travel),
+    #: linear_output c (T_out - T_out(0)), square_output c (T_out^2 - T_out(0)^2); the
+    #: output-tension forms need the output load cell.
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
-        "linear_input": ("input", 0, False), "linear_output": ("output", 1, False),
-        "square_output": ("output", 1, False)}
+        "linear_input": ("output", 1, False), "square_input_reading": ("output", 1, False),
+        "linear_output": ("output", 1, False), "square_output": ("output", 1, False)}
+    labels: ClassVar[dict[str, str]] = {"square_input_reading": "square_input"}
     #: Play thresholds averaged over the friction path (the profile's quadrature).
     n_profile = 8
     #: Profiles kept for the refinement of c (a run's few (R, w) points).
@@ -275,15 +280,18 @@ class TendonElongation(Effect):
                 for c in (0.03, 0.08, 0.17, 0.35, 0.7)] + self.form_grid(ident)
 
     def form_grid(self, ident: RunData) -> list[Any]:
-        span = float(np.ptp(ident.u))
-        return [("linear_input", c * span) for c in (0.03, 0.1, 0.3)] + [
-            ("linear_output", 0.0), ("square_output", 0.0)]
+        out = [("linear_input", 0.0), ("square_input_reading", 0.0)]
+        if ident.tension_out is not None:
+            out += [("linear_output", 0.0), ("square_output", 0.0)]
+        return out
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
-        if run.tension is None:
-            raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
-        t = run.tension
-        if theta[0] == "linear_output":
+        form = theta[0]
+        t = run.tension_out if form in ("linear_output", "square_output") else run.tension
+        if t is None:
+            raise HysteresisError(f"run {run.run_id}: form {form} of tendon_elongation needs "
+                                  "its tension channel")
+        if form in ("linear_input", "linear_output"):
             x = (t - t[0]) / ctx["t_max"]
         else:
             x = (t**2 - t[0] ** 2) / ctx["tension_scale"]
@@ -328,12 +336,6 @@ class TendonElongation(Effect):
 
     def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
                         friction: FloatArray | None = None) -> FloatArray:
-        if theta[0] == "linear_input":
-            if run.tension is None:
-                raise HysteresisError(
-                    f"run {run.run_id}: tendon_elongation needs a tension channel")
-            lin = float(theta[1]) * (run.tension - run.tension[0]) / ctx["t_max"]
-            return np.asarray(u - ctx["pull_sign"] * lin, dtype=np.float64)
         big_r, w, c = theta
         stretch = c * self.profile(run, big_r, w, ctx, friction=friction)
         return np.asarray(u - ctx["pull_sign"] * stretch, dtype=np.float64)
@@ -412,8 +414,8 @@ class Asymmetry(Effect):
     )
     term = ("one-way backlash: c * m(t), m = 0 before the first motion, 1 after (a loop-centre "
             "shift born at once); loading_gain: c1 (y_base - centre) s(t) + c2 s(t), the "
-            "branches steeper one way (s = +-1, the direction of motion); pull_push_gain: c (y_base - centre) "
-            "on the pull side of the centre only")
+            "branches steeper one way (s = +-1, the direction of motion); pull_push_gain: "
+            "c (y_base - centre) on the pull side of the centre only")
     n_linear = 1
     before_stop = True
     first_form = "one_way_backlash"
@@ -556,7 +558,9 @@ class Term:
 
     @property
     def form(self) -> str:
-        return self.effect.form(self.theta)
+        """The physical form, as reported."""
+        f = self.effect.form(self.theta)
+        return self.effect.labels.get(f, f)
 
     @property
     def side(self) -> str:

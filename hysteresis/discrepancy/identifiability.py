@@ -18,39 +18,49 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-#: class label -> (members, the claim of :mod:`.evidence` that separates them, the channel).
-CLASSES: dict[str, tuple[frozenset[tuple[str, str | None]], str, str]] = {
+#: class label -> (members, the load-cell claim of :mod:`.evidence` that separates them or None
+#: when a term on the channel does, the channel (a :class:`.runs.RunData` field), its name).
+CLASSES: dict[str, tuple[frozenset[tuple[str, str | None]], str | None, str, str]] = {
     "dead_zone or asymmetry": (
         frozenset({("dead_zone", "backlash"), ("dead_zone", "dead_band"),
                    ("asymmetry", "one_way_backlash")}),
-        "dead_travel", "the input tension"),
+        "dead_travel", "tension", "the input tension"),
+    # a stretch with the square of the output tension, which follows the output through the
+    # output spring, is a static curvature of the output, as a soft stop or a softening is
+    "saturation or tendon_elongation": (
+        frozenset({("saturation", "soft"), ("saturation", "cubic"),
+                   ("tendon_elongation", "square_output")}),
+        None, "tension_out", "the output tension"),
 }
 
 
 def class_of(name: str, form: str) -> str | None:
     """The class of ``(name, form)``, or None when it is told apart from every other."""
-    for label, (members, _, _) in CLASSES.items():
+    for label, (members, _, _, _) in CLASSES.items():
         if (name, form) in members or (name, None) in members:
             return label
     return None
 
 
-def statement(effect: Mapping[str, Any], has_tension: bool) -> dict[str, Any] | None:
+def statement(effect: Mapping[str, Any], channels: set[str] | frozenset[str]
+              ) -> dict[str, Any] | None:
     """The identifiability answer for the first effect named (``effect``: a report entry with
-    its ``name``, ``form`` and ``evidence``): None when it stands alone, else the class, its
-    members and why it is not split. With the separating channel present, a reading that shows
-    the named member's claim splits the class (the name stands); one that does not, or a
-    missing channel, leaves the class."""
+    its ``name``, ``form`` and ``evidence``; ``channels``: the tension channels every run
+    carries): None when it stands alone, else the class, its members and why it is not
+    split. With the separating channel present the class splits: through a load-cell reading
+    that shows the named member's claim (a reading that does not leaves the class), or, for a
+    class without a reading, through the term on that channel, which competed in the fit."""
     label = class_of(str(effect["name"]), str(effect.get("form", "")))
     if label is None:
         return None
-    members, claim, channel = CLASSES[label]
+    members, claim, channel, text = CLASSES[label]
+    present = channel in channels
     ev = (effect.get("evidence") or {}).get("load_cell_evidence") or {}
-    if has_tension and ev.get("claim") == claim and ev.get("corroborated"):
+    if present and (claim is None or (ev.get("claim") == claim and ev.get("corroborated"))):
         return None
     names = sorted({m[0] for m in members})
-    why = (f"not separable without {channel}" if not has_tension else
-           f"not separable on these runs: {channel} does not show the {claim.replace('_', ' ')} "
+    why = (f"not separable without {text}" if not present else
+           f"not separable on these runs: {text} does not show the {str(claim).replace('_', ' ')} "
            "that would tell them apart")
     return {"class": names, "label": label, "named": effect["name"], "form": effect.get("form"),
             "statement": f"{label}: {why}"}

@@ -43,6 +43,7 @@ from hysteresis.discrepancy.effects import (
 )
 from hysteresis.discrepancy.evidence import corroboration
 from hysteresis.discrepancy.identifiability import statement
+from hysteresis.discrepancy.library import screen
 from hysteresis.discrepancy.locate import autocorrelation, locate
 from hysteresis.discrepancy.runs import RunData, concat_runs
 
@@ -363,6 +364,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     effects: list[dict[str, Any]] = []
     located: list[dict[str, Any]] = []
     rankings: list[list[dict[str, Any]]] = []
+    screens: list[dict[str, list[dict[str, Any]]]] = []
     evaluations = [current]
     remaining = [n for n in st.candidates if all(CANDIDATES[n].available(r) for r in all_runs)]
     skipped = [n for n in st.candidates if n not in remaining]
@@ -397,6 +399,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                 failed[name] = str(err)
         scores.sort(key=lambda s: s["delta_bic"])
         rankings.append([_public(s) for s in scores])
+        screens.append(_screen(groups, current, remaining))
         final_scores = {s["name"]: s for s in scores}
         # A change the load cells show is measured, not inferred from the output:
         # an acceptable candidate with that corroboration goes ahead of the others.
@@ -463,12 +466,13 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     e_id0, e_h0 = evaluations[0].errors(groups)
     e_id1, e_h1 = current.errors(groups)
     residual = _final_residual(groups, current)
-    has_tension = all(r.tension is not None for r in all_runs)
+    channels = {c for c in ("tension", "tension_out")
+                if all(getattr(r, c) is not None for r in all_runs)}
     report: dict[str, Any] = {
         "base_family": base_name,
         "verdict": _verdict(effects, residual, st.clean_factor),
         # the first effect's class when the channels present cannot tell it from another
-        "identifiability": statement(effects[0], has_tension) if effects else None,
+        "identifiability": statement(effects[0], channels) if effects else None,
         "residual": residual,
         "effects": effects,
         "located": located,
@@ -480,6 +484,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                                for n in skipped},
         "candidates_failed": failed,
         "rankings": rankings,
+        "library_screen": screens,
         "summary": {
             "configurations": [g.key for g in groups],
             "identification_runs": [g.ident.run_id for g in groups],
@@ -493,6 +498,17 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     report["_evaluations"] = evaluations
     report["_groups"] = groups
     return report
+
+
+def _screen(groups: Sequence[Group], current: Evaluation,
+            names: Sequence[str]) -> dict[str, list[dict[str, Any]]]:
+    """The sparse screen of the linear forms (:func:`.library.screen`) on each configuration's
+    identification residual of the current model."""
+    out = {}
+    for g in groups:
+        pred = current.ident_pred[g.ident.run_id]
+        out[g.key] = screen(g.ident, g.ident.y - pred, pred, names)
+    return out
 
 
 def _forms(name: str, models: Mapping[str, ComposedModel],

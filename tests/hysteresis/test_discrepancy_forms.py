@@ -65,17 +65,17 @@ def test_linear_creep_term_recovers_a_known_creep_exactly() -> None:
 def test_a_one_way_backlash_is_answered_with_its_class_unless_the_load_cell_splits_it() -> None:
     entry = {"name": "asymmetry", "form": "one_way_backlash",
              "evidence": {"load_cell_evidence": {"claim": None, "corroborated": None}}}
-    ident = statement(entry, has_tension=False)
+    ident = statement(entry, channels=set())
     assert ident is not None and set(ident["class"]) == {"dead_zone", "asymmetry"}
     assert ident["statement"] == ("dead_zone or asymmetry: not separable without the input "
                                   "tension")
     # a backlash the input load cell shows (a dead travel at every reversal) is named
     shown = {"name": "dead_zone", "form": "backlash", "evidence": {"load_cell_evidence": {
         "claim": "dead_travel", "corroborated": True}}}
-    assert statement(shown, has_tension=True) is None
-    assert statement({**shown, "evidence": {}}, has_tension=True) is not None
+    assert statement(shown, channels={"tension"}) is None
+    assert statement({**shown, "evidence": {}}, channels={"tension"}) is not None
     # effects outside a class stand alone
-    assert statement({"name": "drift", "form": "linear"}, has_tension=False) is None
+    assert statement({"name": "drift", "form": "linear"}, channels=set()) is None
 
 
 def test_a_one_way_backlash_on_a_play_base_is_absorbed_not_misnamed() -> None:
