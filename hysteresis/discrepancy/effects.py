@@ -68,6 +68,9 @@ class Effect:
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {}
     #: The name a form is reported under, where it differs from its tag.
     labels: ClassVar[dict[str, str]] = {}
+    #: Does the effect's load-cell claim (:mod:`.evidence`) hold for every form, or only for
+    #: the first (a backlash at the reversals, not a static band about the rest)?
+    claim_all_forms: bool = False
 
     def form(self, theta: Any) -> str:
         """The physical form ``theta`` stands for."""
@@ -168,6 +171,8 @@ class RateDependence(Effect):
     has_theta = True
     n_theta = 2
     first_form = "speed_friction"
+    #: any speed law of the sheath's friction raises the friction the two load cells read
+    claim_all_forms = True
     #: viscous: c v; power: c sign(v) |v / v_top|^a (nonlinear damping); relaxation: c times
     #: the speed through a first-order lag of time constant T (a Maxwell element's force).
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
