@@ -8,6 +8,9 @@ guess. The workflow then answers with the class:
   shift-invariant plant turns into an output offset. On the output the three are one effect;
   the input load cell separates them when the backlash sits ahead of it (the tension then
   stands still for the dead travel after every reversal, :mod:`.backlash`).
+* ``saturation or tendon_elongation``: a stretch with the square of the output tension, which
+  follows the output through the follower's spring, is a static curvature of the output, as a
+  soft stop or a cubic softening is; the output tension separates them.
 
 Each class is a set of ``(effect, form)`` pairs (``form`` None: every form of the effect) and the
 load-cell claim that separates its members when the runs carry the channel.

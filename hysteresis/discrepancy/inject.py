@@ -3,23 +3,32 @@
 The virtual rig simulates a tendon-sheath mechanism with its own physics; the candidate terms
 of :mod:`.effects` were written against it. To check that the workflow names effects it was not
 built on, this module makes runs another way: a *plain plant* (a Gamma play sum, a Preisach
-plane or a Bouc-Wen model, each a fixed model of the hysteresis family, not fitted to any rig)
-is driven by three 80 s excitations and one effect is injected, coded here from its physical
-description and not from the candidate's term:
+plane or a Bouc-Wen model fitted once to one reference play loop, or a textbook Bouc-Wen of its
+own softening shape, ``bouc_wen_loop``) is driven by three 80 s excitations, from rest or from a
+loaded start (a stroke to the far side and back before the run), and one effect form is
+injected, coded here from its physical description and not from the candidate's term
+(:data:`SIZES` keys ``effect`` or ``effect:form``):
 
-* ``time_delay``: the output is read ``tau`` late;
-* ``dead_zone``: an actuator backlash of total width ``d`` before the plant (and the tendon);
-* ``rate_dependence``: the plant's input lags by a lost motion that grows with the sliding speed
-  (friction rising with speed): a backlash whose width follows ``|v|``;
+* ``time_delay``: the output is read ``tau`` late (``:long``: up to 0.9 s);
+* ``dead_zone``: an actuator backlash before the plant (and the tendon); ``:dead_band``: a
+  static band around the rest position;
+* ``rate_dependence``: lost motion that grows with the sliding speed (a backlash whose width
+  follows ``|v|``); ``:viscous``, ``:power`` (``|v|^0.5``), ``:relaxation`` (a Maxwell
+  element): a force with the carriage's speed lowers the reading;
 * ``tendon_elongation``: the tendon stretches as ``k T^2`` before the plant sees the motion;
-* ``drift``: a slow creep ``c (1 - exp(-t / tau))`` added to the reading;
-* ``asymmetry``: friction higher one way: a backlash that opens on loading only (the loop
-  shifts by a constant from the first motion on);
-* ``saturation``: an end-of-stroke stop: the output is clipped softly near its top.
+  ``:linear_input``: as ``k T``; ``:linear_output``,
+  ``:square_output``: with the output tension (the follower's return spring, not recorded);
+* ``drift``: a creep ``c (1 - exp(-t / tau))``; ``:linear``: ``c t``;
+* ``asymmetry``: a backlash that opens on loading only (the loop shifts from the first motion
+  on); ``:loading_gain``: branches of different slope; ``:pull_push_gain``: a larger gain on
+  the pull side of rest;
+* ``saturation``: a soft (tanh) stop near the top; ``:hard``: a hard stop; ``:cubic``: cubic
+  softening.
 
 Each run carries an input tension (the tendon's end, after any backlash: a linear spring
 preload plus a friction step that follows the direction of motion) and white noise of known
-size on the output. Pure arrays in, :class:`~.runs.RunData` out.
+size on the output. :data:`NOT_IDENTIFIABLE` and :func:`identifiable` are the ground truth of
+what the runs can single out. Pure arrays in, :class:`~.runs.RunData` out.
 """
 
 from __future__ import annotations
@@ -148,7 +157,7 @@ SIZES: dict[str, float] = {
     "rate_dependence:power": 0.25,          # mm at the identification sine's top speed
     "rate_dependence:relaxation": 0.08,     # mm per (mm/s), relaxing with RELAXATION_S
     "tendon_elongation": 0.5,               # mm of stretch at the largest tension (T^2, input)
-    "tendon_elongation:linear_input": 0.5,  # mm at the largest tension, T_in, on the reading
+    "tendon_elongation:linear_input": 0.5,  # mm at the largest tension, T_in, input travel
     "tendon_elongation:linear_output": 0.4,  # mm at T_out = TENSION_TOP_N, T_out, on the reading
     "tendon_elongation:square_output": 0.4,  # the same, T_out^2
     "drift": 0.4,                           # mm, exponential creep (30 s)
@@ -260,6 +269,8 @@ def _drive(uf: FloatArray, tf: FloatArray, m: int, effects: Mapping[str, float]
     t_start = float(tension[m])  # the run's first reading (the load cell reads newtons)
     if size("tendon_elongation"):
         ut = ut - size("tendon_elongation") * (tension**2 - t_start**2) / TENSION_TOP_N**2
+    # a linear spring ahead of the sheath
+    ut = ut - size("tendon_elongation:linear_input") * (tension - t_start) / TENSION_TOP_N
     if size("rate_dependence"):
         lost = size("rate_dependence") * np.tanh(np.abs(vel) / FRICTION_SPEED_MM_S)
         ut = _play(ut, lost, lost)
@@ -310,8 +321,6 @@ def _reading(y: FloatArray, uf: FloatArray, tf: FloatArray, tension: FloatArray,
     if size("rate_dependence:relaxation"):
         dt = float(tf[1] - tf[0])
         y = y - size("rate_dependence:relaxation") * _lowpass(speed_in, RELAXATION_S, dt)
-    # a compliance that reads the input tension: the reading shortened by c (T - T(0))
-    y = y - size("tendon_elongation:linear_input") * (tension - tension[m]) / TENSION_TOP_N
     # the output tension: the follower's return spring (not recorded by these runs)
     t_out = OUTPUT_PRELOAD_N + OUTPUT_SPRING_N_MM * y
     y = y - size("tendon_elongation:linear_output") * (t_out - t_out[m]) / TENSION_TOP_N
