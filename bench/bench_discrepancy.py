@@ -1,8 +1,10 @@
 """Benchmark of the discrepancy workflow.
 
 ``injector``: what ``make discrepancy`` answers (automatic base) on the independent
-injector's matrix (every effect at two strengths on three plants, and clean sources), with
-seconds per source. The rest: one virtual-rig configuration
+injector's first forms (every effect's first form at strength 1 on four plants, and clean
+sources at rest and loaded), with seconds per source; ``--injector`` runs the whole matrix
+(every form at two strengths) and ``--cleanroom`` the clean-room generator's matrix
+(``tests/cleanroom/effects.py``). The rest: one virtual-rig configuration
 (90 deg / 30 mm) with a hidden time delay and drift, seed 001 excitations with 3 periods per
 amplitude, analysed at 20 Hz with the Gamma base. Reports the wall time of the whole
 locate -> name -> add loop, and the ratio against the reference joint refit by backfitting
@@ -47,7 +49,7 @@ def run() -> dict[str, Any]:
     with mock.patch.object(effects, "_joint_linear", lambda *a, **k: None):
         t_backfit, rep_bf = _time(workflow)
     n_samples = sum(r.n for r in runs)
-    injector = injector_sources()
+    injector = injector_sources(first_form_cases())
     return {
         "injector": injector,
         "blas_limit": blas_limit(),
@@ -78,6 +80,15 @@ def injector_cases(strengths: tuple[float, ...] = STRENGTHS
     for s in strengths:
         cases.update({f"{key}@{s:g}": ({key: s}, "rest") for key in FORMS})
     return cases
+
+
+def first_form_cases() -> dict[str, tuple[dict[str, float], str]]:
+    """The clean cases and every effect's first form at strength 1 (what ``make bench``
+    measures; the forms' matrix takes hours on 2 shared cores)."""
+    from hysteresis.discrepancy.inject import INJECTED
+
+    return {k: v for k, v in injector_cases((1.0,)).items()
+            if k.startswith("clean") or k.split("@")[0] in INJECTED}
 
 
 def injector_sources(cases: dict[str, tuple[dict[str, float], str]] | None = None,
@@ -406,11 +417,13 @@ if __name__ == "__main__":
         description="The discrepancy workflow's bench; prints its figures as JSON.")
     part = parser.add_mutually_exclusive_group()
     part.add_argument("--injector", action="store_true",
-                      help="only the independent injector's matrix (about 10 min on 2 cores)")
+                      help="only the independent injector's matrix, every form at two "
+                           "strengths (172 sources: about 1.5 h of one core)")
     part.add_argument("--bases", action="store_true",
                       help="only the base-independence table (about 25 min on 2 cores)")
     part.add_argument("--cleanroom", action="store_true",
-                      help="the clean-room effect matrix (tests/cleanroom/effects.py)")
+                      help="the clean-room effect matrix (tests/cleanroom/effects.py; 160 "
+                           "sources at both strengths, about 1.5 h of one core)")
     parser.add_argument("--strong-only", action="store_true",
                         help="with --cleanroom: the strong strength only")
     parser.add_argument("--plants", default="",

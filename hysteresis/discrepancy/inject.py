@@ -195,11 +195,15 @@ def identifiable(key: str, family: str) -> bool:
     return key not in NOT_IDENTIFIABLE
 
 
+#: Injected forms that are a size of another form, not a form of their own.
+SAME_FORM = {"time_delay:long": "latency"}
+
+
 def effect_and_form(key: str) -> tuple[str, str]:
     """``("drift", "linear")`` for ``drift:linear``, ``("drift", "exponential")`` for
-    ``drift``."""
+    ``drift``, ``("time_delay", "latency")`` for ``time_delay:long``."""
     name, _, form = key.partition(":")
-    return name, form or FIRST_FORM[name]
+    return name, SAME_FORM.get(key) or form or FIRST_FORM[name]
 
 
 def _lowpass(x: FloatArray, tau_s: float, dt: float) -> FloatArray:
