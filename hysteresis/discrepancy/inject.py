@@ -195,8 +195,8 @@ def identifiable(key: str, family: str) -> bool:
     return key not in NOT_IDENTIFIABLE
 
 
-#: Injected forms that are a size of another form, not a form of their own.
-SAME_FORM = {"time_delay:long": "latency"}
+#: Injected forms named otherwise by the workflow (a long latency is a latency).
+SAME_FORM = {"time_delay:long": "latency", "saturation:hard": "hard_stop"}
 
 
 def effect_and_form(key: str) -> tuple[str, str]:
