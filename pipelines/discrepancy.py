@@ -656,9 +656,13 @@ def headline(report: Mapping[str, Any]) -> str:
         return (f"no missing effect: no candidate term beats the noise on the held-out runs "
                 f"(base {report['base_family']}, {rmse}){absorbed}{also}")
     parts = []
-    for e in report["effects"]:
+    ident = report.get("identifiability")
+    for i, e in enumerate(report["effects"]):
         cut = 1.0 - e["heldout_rmse_after"] / e["heldout_rmse_before"]
-        parts.append(f"{e['name']} (held-out RMSE {e['heldout_rmse_before']:.4g} -> "
+        name = f"{e['name']} ({e['form']})" if e.get("form") else e["name"]
+        if i == 0 and ident:
+            name = ident["statement"]
+        parts.append(f"{name} (held-out RMSE {e['heldout_rmse_before']:.4g} -> "
                      f"{e['heldout_rmse_after']:.4g}, -{100 * cut:.1f} %)")
     return f"base {report['base_family']} is missing: " + "; then ".join(parts) + also
 

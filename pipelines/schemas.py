@@ -260,9 +260,9 @@ class DiscrepancyConfig:
     #: Base family: a registered family name (gamma, preisach, bouc_wen, coleman_hodgdon,
     #: linear), a local one (play_sum, affine), or ``auto`` = the family of ``auto_families``
     #: with the lowest held-out RMSE on this source (the best standard family). As a base,
-    #: gamma is the thesis' physical form (sum-to-one, no offset, zero start, widest play 1/6
-    #: of the input's range) so it cannot absorb the effects searched for; base_params
-    #: override it.
+    #: gamma is the thesis' physical form (sum-to-one, no offset, widest play 1/6 of the
+    #: input's range) so it cannot absorb the effects searched for, with every run's start
+    #: taken from the record; base_params override it.
     base_family: str = "auto"
     #: Parameters of the base family (``'+base_params={constraint: free, fit_offset: true}'``;
     #: hysteresis.discrepancy.workflow.BASE_DEFAULTS).

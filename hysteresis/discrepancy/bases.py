@@ -81,3 +81,55 @@ class AffineModel(HysteresisModel):
 
 
 LOCAL_BASES: dict[str, type[HysteresisModel]] = {"play_sum": PlaySumModel, "affine": AffineModel}
+
+
+#: Where a record may start in a base's state space: at rest (the family's own start), after
+#: a pull (the last motion rose to the first input: ``loaded``) or after a release.
+STARTS = ("rest", "loaded", "unloaded")
+#: Samples of the stroke that brings the base to a loaded or unloaded start.
+_PREHISTORY_SAMPLES = 100
+
+
+class FromRecordStart(HysteresisModel):
+    """A base family whose own fit starts every record at rest, started instead where the
+    record shows it starts: at rest, or at a band edge after a pull or a release.
+
+    The state is reached the way the plant reached it: the base is driven through a stroke of
+    the identification input's span that ends at the run's first input (from below for
+    ``loaded``, from above for ``unloaded``), and the run is predicted from there. The start
+    is chosen on the identification record (the one a plant starting loaded repeats on every
+    run) and applied at every run's own first input; one of the edges must lower the squared
+    error by :data:`hysteresis.gamma.START_GAIN` to be taken, as Gamma's fitted start position.
+    """
+
+    family = "from_record_start"
+
+    def __init__(self, factory: Any = None) -> None:
+        self.factory = factory
+
+    def _prehistory(self, u0: float, start: str) -> FloatArray:
+        if start == "rest":
+            return np.zeros(0)
+        s = np.sin(np.linspace(0.0, np.pi, _PREHISTORY_SAMPLES))[:-1]
+        sign = -1.0 if start == "loaded" else 1.0
+        return np.asarray(u0 + sign * self.span_ * s, dtype=np.float64)
+
+    def _run(self, u: FloatArray, start: str) -> FloatArray:
+        pre = self._prehistory(float(u[0]), start)
+        out = self.base_.predict(np.r_[pre, u])
+        return np.asarray(out[pre.size:], dtype=np.float64)
+
+    def fit(self, u: Any, y: Any, **fit_params: Any) -> FromRecordStart:
+        from hysteresis.gamma import START_GAIN
+
+        uu, yy = check_pair(u, y)
+        self.base_ = self.factory().fit(uu, yy, **fit_params)
+        self.span_ = float(np.ptp(uu))
+        sse = {s: float(np.sum((yy - self._run(uu, s)) ** 2)) for s in STARTS}
+        best = min(sse, key=sse.__getitem__)
+        self.start_ = best if sse[best] < (1.0 - START_GAIN) * sse["rest"] else "rest"
+        return self
+
+    def predict(self, u: Any, *, state: Any = None) -> FloatArray:
+        self.check_fitted()
+        return self._run(as_1d(u, "u"), self.start_)

@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -60,6 +60,49 @@ class Effect:
     #: of the best prefixes): where the other components set a shape, a coarse step of the
     #: last one can rank the shapes wrongly.
     refine_starts: int = 1
+    #: The physical form a parameter without a form tag stands for (the term's first form).
+    first_form: str = ""
+    #: The effect's other forms, each given as a parameter tuple ``(form, p1, ..., pk)`` (the
+    #: last component refined): form -> (side, number of linear coefficients, reads the
+    #: base's prediction). The grid search chooses the form with its parameters.
+    forms: ClassVar[dict[str, tuple[str, int, bool]]] = {}
+    #: The name a form is reported under, where it differs from its tag.
+    labels: ClassVar[dict[str, str]] = {}
+    #: Does the effect's load-cell claim (:mod:`.evidence`) hold for every form, or only for
+    #: the first (a backlash at the reversals, not a static band about the rest)?
+    claim_all_forms: bool = False
+
+    def form(self, theta: Any) -> str:
+        """The physical form ``theta`` stands for."""
+        if isinstance(theta, tuple) and theta and isinstance(theta[0], str):
+            return theta[0]
+        return self.first_form
+
+    def _spec(self, theta: Any) -> tuple[str, int, bool] | None:
+        return self.forms.get(self.form(theta)) if self.form(theta) != self.first_form \
+            else None
+
+    def side_of(self, theta: Any) -> str:
+        spec = self._spec(theta)
+        return self.side if spec is None else spec[0]
+
+    def n_linear_of(self, theta: Any) -> int:
+        spec = self._spec(theta)
+        return self.n_linear if spec is None else spec[1]
+
+    def uses_base_of(self, theta: Any) -> bool:
+        spec = self._spec(theta)
+        return self.uses_base if spec is None else spec[2]
+
+    def before_stop_of(self, theta: Any) -> bool:
+        return self.before_stop and self._spec(theta) is None
+
+    def operator_of(self, theta: Any) -> bool:
+        return self.operator and self._spec(theta) is None
+
+    def form_grid(self, ident: RunData) -> list[Any]:
+        """Grid points of the forms other than the first (``(form, ...)`` tuples)."""
+        return []
 
     def delayed(self, run: RunData, theta: Any) -> RunData:
         """The run as the model sees it with this term: channels made late by a latency
@@ -127,19 +170,45 @@ class RateDependence(Effect):
     g_max = 1.0
     has_theta = True
     n_theta = 2
+    first_form = "speed_friction"
+    #: any speed law of the sheath's friction raises the friction the two load cells read
+    claim_all_forms = True
+    #: viscous: c v; power: c sign(v) |v / v_top|^a (nonlinear damping); relaxation: c times
+    #: the speed through a first-order lag of time constant T (a Maxwell element's force).
+    forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
+        "viscous": ("output", 1, False), "power": ("output", 1, False),
+        "relaxation": ("output", 1, False)}
 
     def grid(self, ident: RunData) -> list[Any]:
         vmax = float(np.percentile(np.abs(ident.v), 99))
         span = float(np.ptp(ident.u))
         return [(f * vmax, c * span) for f in (0.3, 0.8, 3.0)
-                for c in (0.003, 0.01, 0.025, 0.05, 0.08)]
+                for c in (0.003, 0.01, 0.025, 0.05, 0.08)] + self.form_grid(ident)
+
+    def form_grid(self, ident: RunData) -> list[Any]:
+        return [("viscous", 0.0), ("power", 0.5), ("power", 2.0), ("relaxation", 0.3),
+                ("relaxation", 1.0), ("relaxation", 3.0)]
 
     def operator_grid(self, ident: RunData) -> list[Any]:
         """(1, v0, g) for the speed-scaled play operators (the leading 1 tags the form; g, the
-        last component, is refined)."""
+        last component, is refined), and the other forms."""
         vmax = float(np.percentile(np.abs(speed(ident)), 99))
         return [(1.0, f * vmax, g) for f in (0.3, 0.5, 0.8, 1.2)
-                for g in (0.15, 0.3, 0.6, self.g_max)]
+                for g in (0.15, 0.3, 0.6, self.g_max)] + self.form_grid(ident)
+
+    def context(self, ident: RunData) -> Ctx:
+        return {"v_top": max(float(np.percentile(np.abs(ident.v), 99)), 1e-12)}
+
+    def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
+        form, p = theta[0], float(theta[-1])
+        v = run.v / ctx["v_top"]
+        if form == "viscous":
+            x = v
+        elif form == "power":
+            x = np.sign(v) * np.abs(v) ** p
+        else:
+            x = lowpass(v, p, run.dt)
+        return np.asarray(x[:, None], dtype=np.float64)
 
     def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
                         friction: FloatArray | None = None) -> FloatArray:
@@ -185,6 +254,16 @@ class TendonElongation(Effect):
     refine_starts = 3
     has_theta = True
     n_theta = 3
+    first_form = "square_input"
+    #: square_output: c (T_out^2 - T_out(0)^2) on the reading (a compliance at the follower's
+    #: side), with the output load cell. Stretches linear in a tension are not searched: a
+    #: tendon-sheath's own tendon is such a spring, in every clean record (on clean
+    #: virtual-rig runs one linear in the input tension took 23 % of the free Gamma's held-out
+    #: error), and the output tension follows the output through the follower's spring, so a
+    #: term linear in it is a gain (with a free sign it also took up a speed-dependent
+    #: friction the output load cell feels, on clean-room runs).
+    forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
+        "square_output": ("output", 1, False)}
     #: Play thresholds averaged over the friction path (the profile's quadrature).
     n_profile = 8
     #: Profiles kept for the refinement of c (a run's few (R, w) points).
@@ -202,7 +281,23 @@ class TendonElongation(Effect):
         # tension (fraction of the input span; refined). c >= 0: a stretch can only shorten.
         span = float(np.ptp(ident.u))
         shapes = [(r, w) for r in (0.1, 0.35, 1.0) for w in (0.0, 0.5)] + [(0.1, 1.0)]
-        return [(r, w, c * span) for r, w in shapes for c in (0.03, 0.08, 0.17, 0.35, 0.7)]
+        return [(r, w, c * span) for r, w in shapes
+                for c in (0.03, 0.08, 0.17, 0.35, 0.7)] + self.form_grid(ident)
+
+    def form_grid(self, ident: RunData) -> list[Any]:
+        out: list[Any] = []
+        if ident.tension_out is not None:
+            out += [("square_output", 0.0)]
+        return out
+
+    def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
+        form = theta[0]
+        t = run.tension_out
+        if t is None:
+            raise HysteresisError(f"run {run.run_id}: form {form} of tendon_elongation needs "
+                                  "the output tension")
+        x = (t**2 - t[0] ** 2) / ctx["tension_scale"]
+        return np.asarray(x[:, None], dtype=np.float64)
 
     def profile(self, run: RunData, big_r: float, w: float, ctx: Ctx, *,
                 friction: FloatArray | None = None) -> FloatArray:
@@ -266,6 +361,7 @@ class TimeDelay(Effect):
             "input, and the tensions and speed its other terms read)")
     side = "input"
     has_theta = True
+    first_form = "latency"
 
     def grid(self, ident: RunData) -> list[float]:
         # the range the record can show (seconds on a long compliant drive), not a fixed cap
@@ -287,15 +383,27 @@ class Drift(Effect):
         "slow creep or thermal offset of the output: residual trends with time since the start, "
         "the same in every phase and at every amplitude"
     )
-    term = "c * (1 - exp(-t / tau)) (t = time since the start of the run, tau on a grid)"
+    term = ("exponential: c * (1 - exp(-t / tau)) (t = time since the start of the run, tau on "
+            "a grid); linear creep: c t")
     n_linear = 1
     has_theta = True
+    first_form = "exponential"
+    forms: ClassVar[dict[str, tuple[str, int, bool]]] = {"linear": ("output", 1, False)}
 
-    def grid(self, ident: RunData) -> list[float]:
+    def grid(self, ident: RunData) -> list[Any]:
         dur = float(np.max(ident.ts))  # the longest identification record
-        return [f * dur for f in (0.05, 0.1, 0.25, 0.5, 1.0, 1.5, 3.0, 10.0)]
+        return [f * dur for f in (0.05, 0.1, 0.25, 0.5, 1.0, 1.5, 3.0, 10.0)] + \
+            self.form_grid(ident)
+
+    def form_grid(self, ident: RunData) -> list[Any]:
+        return [("linear", 0.0)]
+
+    def context(self, ident: RunData) -> Ctx:
+        return {"duration": max(float(np.max(ident.ts)), 1e-12)}
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
+        if self.form(theta) == "linear":
+            return np.asarray((run.ts / ctx["duration"])[:, None], dtype=np.float64)
         return np.asarray((1.0 - np.exp(-run.ts / float(theta)))[:, None], dtype=np.float64)
 
 
@@ -305,11 +413,34 @@ class Asymmetry(Effect):
         "direction-dependent friction: more lost motion pulling than releasing (or the reverse); "
         "the loop centre shifts by a constant from the first motion on, width about the same"
     )
-    term = "c * m(t), m = 0 before the first motion, 1 after (a loop-centre shift born at once)"
+    term = ("one-way backlash: c * m(t), m = 0 before the first motion, 1 after (a loop-centre "
+            "shift born at once); loading_gain: c1 (y_base - centre) s(t) + c2 s(t), the "
+            "branches steeper one way (s = +-1, the direction of motion); pull_push_gain: "
+            "c (y_base - centre) on the pull side of the centre only")
     n_linear = 1
     before_stop = True
+    first_form = "one_way_backlash"
+    forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
+        "loading_gain": ("output", 2, True), "pull_push_gain": ("output", 1, True)}
+
+    def grid(self, ident: RunData) -> list[Any]:
+        return [NO_THETA, *self.form_grid(ident)]
+
+    def form_grid(self, ident: RunData) -> list[Any]:
+        return [("loading_gain", 0.0), ("pull_push_gain", 0.0)]
+
+    def context(self, ident: RunData) -> Ctx:
+        return {"centre": 0.5 * float(ident.y.max() + ident.y.min())}
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
+        form = self.form(theta)
+        if form == "loading_gain":
+            # the branches' slopes differ by direction, and so does their offset: the
+            # branches of a backlash whose two sides differ in slope
+            return np.column_stack([(y_base - ctx["centre"]) * run.s, run.s])
+        if form == "pull_push_gain":
+            return np.asarray(np.maximum(y_base - ctx["centre"], 0.0)[:, None],
+                              dtype=np.float64)
         return np.abs(run.s)[:, None]
 
 
@@ -324,14 +455,33 @@ class Saturation(Effect):
     n_linear = 2
     has_theta = True
     uses_base = True
+    first_form = "hard_stop"
+    #: soft: a tanh-like stop, the excess e beyond the knee becoming s tanh(e / s) (s a tenth
+    #: of the half-range); cubic: softening c (y - centre)^3 on each side.
+    forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
+        "soft": ("output", 2, True), "cubic": ("output", 2, True)}
+    softness = 0.1
 
-    def grid(self, ident: RunData) -> list[float]:
-        return [0.5, 0.7, 0.8, 0.9, 0.95, 1.0]
+    def grid(self, ident: RunData) -> list[Any]:
+        return [0.5, 0.7, 0.8, 0.9, 0.95, 1.0, *self.form_grid(ident)]
+
+    def form_grid(self, ident: RunData) -> list[Any]:
+        return [("soft", 0.6), ("soft", 0.8), ("soft", 0.9), ("cubic", 0.0)]
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
-        hi = ctx["centre"] + theta * ctx["half"]
-        lo = ctx["centre"] - theta * ctx["half"]
-        return np.column_stack([np.maximum(y_base - hi, 0.0), np.maximum(lo - y_base, 0.0)])
+        form = self.form(theta)
+        if form == "cubic":
+            x = (y_base - ctx["centre"]) / ctx["half"]
+            return ctx["half"] * np.column_stack([np.maximum(x, 0.0) ** 3,
+                                                  np.minimum(x, 0.0) ** 3])
+        knee = float(theta[-1]) if form == "soft" else float(theta)
+        hi = ctx["centre"] + knee * ctx["half"]
+        lo = ctx["centre"] - knee * ctx["half"]
+        up, down = np.maximum(y_base - hi, 0.0), np.maximum(lo - y_base, 0.0)
+        if form == "soft":
+            s = self.softness * ctx["half"]
+            up, down = up - s * np.tanh(up / s), down - s * np.tanh(down / s)
+        return np.column_stack([up, down])
 
     def context(self, ident: RunData) -> Ctx:
         return {"centre": 0.5 * float(ident.y.max() + ident.y.min()),
@@ -345,16 +495,32 @@ class DeadZone(Effect):
         "fixed input travel; residual is a direction-dependent step of the same size at every "
         "amplitude and speed, born at the reversals"
     )
-    term = "y = base(play_{d/2}(u)), d = dead-zone width"
+    term = ("backlash: y = base(play_{d/2}(u)), d = dead-zone width; dead_band: a static band "
+            "of width d around the input's rest (the centre of its range) passes nothing")
     side = "input"
     has_theta = True
+    first_form = "backlash"
+    forms: ClassVar[dict[str, tuple[str, int, bool]]] = {"dead_band": ("input", 0, False)}
 
-    def grid(self, ident: RunData) -> list[float]:
+    def grid(self, ident: RunData) -> list[Any]:
         span = float(np.ptp(ident.u))
-        return [f * span for f in (0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15)]
+        return [f * span for f in (0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15)] + \
+            self.form_grid(ident)
+
+    def form_grid(self, ident: RunData) -> list[Any]:
+        span = float(np.ptp(ident.u))
+        return [("dead_band", f * span) for f in (0.01, 0.03, 0.06, 0.1)]
+
+    def context(self, ident: RunData) -> Ctx:
+        return {"rest": 0.5 * float(ident.u.max() + ident.u.min())}
 
     def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
                         friction: FloatArray | None = None) -> FloatArray:
+        if self.form(theta) == "dead_band":
+            x = u - ctx["rest"]
+            half = 0.5 * float(theta[1])
+            return np.asarray(ctx["rest"] + np.sign(x) * np.maximum(np.abs(x) - half, 0.0),
+                              dtype=np.float64)
         return play(u, 0.5 * theta, z0=float(u[0]))
 
 
@@ -391,16 +557,51 @@ class Term:
     def context(self) -> Ctx:
         return dict(self.ctx)
 
+    @property
+    def form(self) -> str:
+        """The physical form, as reported."""
+        f = self.effect.form(self.theta)
+        return self.effect.labels.get(f, f)
+
+    @property
+    def side(self) -> str:
+        return self.effect.side_of(self.theta)
+
+    @property
+    def n_linear(self) -> int:
+        return self.effect.n_linear_of(self.theta)
+
+    @property
+    def uses_base(self) -> bool:
+        return self.effect.uses_base_of(self.theta)
+
+    @property
+    def before_stop(self) -> bool:
+        return self.effect.before_stop_of(self.theta)
+
+    @property
+    def operator(self) -> bool:
+        return self.effect.operator_of(self.theta)
+
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.effect.name,
+        return {"name": self.effect.name, "form": self.form,
                 "theta": _theta_json(self.theta),
                 "context": self.context}
 
 
 def _theta_json(theta: Any) -> Any:
     if isinstance(theta, tuple):
-        return [float(x) for x in theta]
+        return [x if isinstance(x, str) else float(x) for x in theta]
     return None if not np.isfinite(theta) else float(theta)
+
+
+def lowpass(x: FloatArray, tau_s: float, dt: float) -> FloatArray:
+    """First-order lag of time constant ``tau_s`` (exact for a sampled step), from ``x[0]``."""
+    from scipy.signal import lfilter
+
+    a = float(np.exp(-dt / max(tau_s, 1e-12)))
+    out, _ = lfilter([1.0 - a], [1.0, -a], x, zi=[a * float(x[0])])
+    return np.asarray(out, dtype=np.float64)
 
 
 class ComposedModel:
@@ -425,7 +626,7 @@ class ComposedModel:
         them (the carriage's backlash before the tendon's stretch), whatever order they joined
         in. ``friction``: the operator terms' factor when the caller has it already."""
         u = run.u
-        inputs = [t for t in self.terms if t.effect.side == "input" and not self._on_operators(t)]
+        inputs = [t for t in self.terms if t.side == "input" and not self._on_operators(t)]
         if inputs and friction is None:
             friction = self._friction(run)
         for term in sorted(inputs, key=lambda t: t.effect.input_stage):
@@ -434,7 +635,7 @@ class ComposedModel:
 
     def _on_operators(self, term: Term) -> bool:
         """Does ``term`` act on the base's play operators (a Gamma base) instead of its input?"""
-        if not term.effect.operator:
+        if not term.operator:
             return False
         if self._gamma is None:
             self._gamma = is_gamma(self.base_factory())
@@ -486,7 +687,7 @@ class ComposedModel:
         setup = _gamma_setup(base, run)
         a = self._scaled_design(run, base, setup)
         n_w = int(setup[0].size)
-        uses_base = any(t.effect.uses_base for t in self.terms if t.effect.n_linear > 0)
+        uses_base = any(t.uses_base for t in self.terms if t.n_linear > 0)
         yb = run.y
         x = np.zeros(a.shape[1])
         coef: FloatArray | None = None  # no estimate before the first solve
@@ -509,19 +710,19 @@ class ComposedModel:
         prediction (a stop) reads the follower's motion: the base plus the contributions of
         the terms that act inside the mechanism (``before_stop``, weighted by ``coef``, the
         current estimate of all coefficients; None: not known yet)."""
-        out = [t for t in self.terms if t.effect.n_linear > 0]
+        out = [t for t in self.terms if t.n_linear > 0]
         cols: dict[int, FloatArray] = {}
         motion = y_base
         start = 0
         for i, t in enumerate(out):
-            n = t.effect.n_linear
-            if not t.effect.uses_base:
+            n = t.n_linear
+            if not t.uses_base:
                 cols[i] = t.effect.features(run, t.theta, y_base, t.context)
-                if coef is not None and t.effect.before_stop:
+                if coef is not None and t.before_stop:
                     motion = motion + cols[i] @ coef[start:start + n]
             start += n
         for i, t in enumerate(out):
-            if t.effect.uses_base:
+            if t.uses_base:
                 cols[i] = t.effect.features(run, t.theta, motion, t.context)
         return np.hstack([cols[i] for i in range(len(out))]) if out else np.empty((run.n, 0))
 
@@ -539,8 +740,8 @@ class ComposedModel:
             return self._fit_operators(run)
         u = self._input(run)
         y = run.y
-        out_terms = [t for t in self.terms if t.effect.n_linear > 0]
-        if out_terms and not any(t.effect.uses_base for t in out_terms):
+        out_terms = [t for t in self.terms if t.n_linear > 0]
+        if out_terms and not any(t.uses_base for t in out_terms):
             joint = _joint_linear(self.base_factory(), u, y, self._features(run, y))
             if joint is not None:
                 base = self.base_factory()
@@ -722,12 +923,21 @@ def _fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: E
         def prefix_of(g: Any) -> tuple[Any, ...]:
             return tuple(g[:-1]) if isinstance(g, tuple) else ()
 
+        # The first form's best prefixes, and the best point of every other form that comes
+        # near the best fit (a form's points do not take the first form's places).
         starts: list[int] = []
-        for i in np.argsort(sses, kind="stable"):
-            if all(prefix_of(grid[int(i)]) != prefix_of(grid[j]) for j in starts):
-                starts.append(int(i))
+        order = [int(i) for i in np.argsort(sses, kind="stable")]
+        for i in order:
+            if effect.form(grid[i]) != effect.first_form:
+                continue
+            if all(prefix_of(grid[i]) != prefix_of(grid[j]) for j in starts):
+                starts.append(i)
             if len(starts) == effect.refine_starts:
                 break
+        for form in {effect.form(g) for g in grid} - {effect.first_form}:
+            i = next(i for i in order if effect.form(grid[i]) == form)
+            if sses[i] <= FORM_REFINE_FACTOR * sses[best]:
+                starts.append(i)
         best_sse = sses[best]
         for i in starts:
             th = grid[i]
@@ -751,6 +961,11 @@ def _fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: E
     if screen is not None:
         return build(model.terms[-1].theta, base_factory)
     return model
+
+
+#: A form other than an effect's first is refined when its best grid point fits the
+#: identification run within this factor of the best point's squared error.
+FORM_REFINE_FACTOR = 1.25
 
 
 class ScreenedFactory:

@@ -42,6 +42,8 @@ from hysteresis.discrepancy.effects import (
     memoised_fits,
 )
 from hysteresis.discrepancy.evidence import corroboration
+from hysteresis.discrepancy.identifiability import statement
+from hysteresis.discrepancy.library import screen
 from hysteresis.discrepancy.locate import autocorrelation, locate
 from hysteresis.discrepancy.runs import RunData, concat_runs
 
@@ -198,6 +200,16 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
         term = models[g.key].terms[-1]
         coef = models[g.key].coef_
         params[g.key] = {**term.to_dict(), "coefficients": [float(c) for c in coef]}
+    evidence = load_cells if load_cells is not None else corroboration(
+        effect.name, [g.ident for g in groups])
+    forms = {models[g.key].terms[-1].form for g in groups}
+    if (evidence.get("claim") is not None and forms != {effect.first_form}
+            and not effect.claim_all_forms):
+        # a backlash claims a dead travel at the reversals, a direction-dependent friction a
+        # pull/release ratio; a static dead band or a direction-dependent gain claims nothing
+        # the load cells read
+        evidence = {"claim": None, "per_configuration": {}, "corroborated": None,
+                    "note": f"form {'/'.join(sorted(forms))} makes no load-cell claim"}
     return {
         "name": effect.name,
         "models": models,
@@ -214,8 +226,7 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
         "residual_explained": explained,
         # A load-cell claim must show in the load cells (None: the candidate makes no such
         # claim, or the runs lack the channels the reading needs).
-        "load_cell_evidence": load_cells if load_cells is not None else corroboration(
-            effect.name, [g.ident for g in groups]),
+        "load_cell_evidence": evidence,
         "heldout_per_run": {rid: {"before": r0[rid], "after": r1[rid]} for rid in r0},
         "parameters": params,
     }
@@ -301,13 +312,14 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
         eff = CANDIDATES[name]
         if not eff.available(ident):
             continue
-        grid = eff.grid(ident)
+        grid = [g for g in eff.grid(ident) if eff.form(g) == eff.first_form]
         theta = grid[len(grid) // 2]
         ctx = eff.context(ident)
         seen = eff.delayed(ident, theta)  # the same path as the composed model's input
-        u = eff.transform_input(seen, seen.u, theta, ctx) if eff.side == "input" else ident.u
+        u = (eff.transform_input(seen, seen.u, theta, ctx) if eff.side_of(theta) == "input"
+             else ident.u)
         y_syn = base.predict(u)
-        if eff.n_linear:
+        if eff.n_linear_of(theta):
             phi = eff.features(ident, theta, y_syn, ctx)
             contrib = phi @ np.ones(phi.shape[1])
             sd = float(np.std(contrib))
@@ -353,6 +365,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     effects: list[dict[str, Any]] = []
     located: list[dict[str, Any]] = []
     rankings: list[list[dict[str, Any]]] = []
+    screens: list[dict[str, list[dict[str, Any]]]] = []
     evaluations = [current]
     remaining = [n for n in st.candidates if all(CANDIDATES[n].available(r) for r in all_runs)]
     skipped = [n for n in st.candidates if n not in remaining]
@@ -387,6 +400,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                 failed[name] = str(err)
         scores.sort(key=lambda s: s["delta_bic"])
         rankings.append([_public(s) for s in scores])
+        screens.append(_screen(groups, current, remaining))
         final_scores = {s["name"]: s for s in scores}
         # A change the load cells show is measured, not inferred from the output:
         # an acceptable candidate with that corroboration goes ahead of the others.
@@ -428,8 +442,11 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
             if model_error:
                 evidence["model_error_regression"] = _regress_model_error(
                     model_error, groups, current, chosen["after"])
+            forms = _forms(chosen["name"], chosen["models"], groups)
+            evidence["form_per_configuration"] = forms
             effects.append({
                 "name": chosen["name"],
+                "form": max(set(forms.values()), key=list(forms.values()).count),
                 "evidence": evidence,
                 "rmse_before": chosen["rmse_before"],
                 "rmse_after": chosen["rmse_after"],
@@ -450,9 +467,13 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     e_id0, e_h0 = evaluations[0].errors(groups)
     e_id1, e_h1 = current.errors(groups)
     residual = _final_residual(groups, current)
+    channels = {c for c in ("tension", "tension_out")
+                if all(getattr(r, c) is not None for r in all_runs)}
     report: dict[str, Any] = {
         "base_family": base_name,
         "verdict": _verdict(effects, residual, st.clean_factor),
+        # the first effect's class when the channels present cannot tell it from another
+        "identifiability": statement(effects[0], channels) if effects else None,
         "residual": residual,
         "effects": effects,
         "located": located,
@@ -464,6 +485,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                                for n in skipped},
         "candidates_failed": failed,
         "rankings": rankings,
+        "library_screen": screens,
         "summary": {
             "configurations": [g.key for g in groups],
             "identification_runs": [g.ident.run_id for g in groups],
@@ -477,6 +499,27 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     report["_evaluations"] = evaluations
     report["_groups"] = groups
     return report
+
+
+def _screen(groups: Sequence[Group], current: Evaluation,
+            names: Sequence[str]) -> dict[str, list[dict[str, Any]]]:
+    """The sparse screen of the linear forms (:func:`.library.screen`) on each configuration's
+    identification residual of the current model."""
+    out = {}
+    for g in groups:
+        pred = current.ident_pred[g.ident.run_id]
+        out[g.key] = screen(g.ident, g.ident.y - pred, pred, names)
+    return out
+
+
+def _forms(name: str, models: Mapping[str, ComposedModel],
+           groups: Sequence[Group]) -> dict[str, str]:
+    """The physical form of effect ``name`` each configuration's model took."""
+    out = {}
+    for g in groups:
+        term = next(t for t in models[g.key].terms if t.effect.name == name)
+        out[g.key] = term.form
+    return out
 
 
 def _final_residual(groups: Sequence[Group], current: Evaluation) -> dict[str, Any]:
@@ -616,13 +659,15 @@ def strip_private(report: dict[str, Any]) -> dict[str, Any]:
 
 
 #: A discrepancy base must not absorb the effects it is searched for: a free offset takes up a
-#: creep, unconstrained weights take up a gain (elongation, saturation) and a fitted start state
-#: takes up a slow start. Gamma as a base is therefore the thesis' physical form (weights summing
-#: to one, no offset, every play at zero, the widest play at the thesis' 1/6 of the input's
-#: range: a span chosen on the data would widen to take up a dead zone, itself a play);
-#: ``base_params`` still override each entry.
+#: creep and unconstrained weights take up a gain (elongation, saturation). Gamma as a base is
+#: therefore the thesis' physical form (weights summing to one, no offset, the widest play at
+#: the thesis' 1/6 of the input's range: a span chosen on the data would widen to take up a
+#: dead zone, itself a play), but every play starts where the record starts (the fitting
+#: defaults' ``start_state="fit"``: a plant starting loaded or at a band edge is clean, and a
+#: zero start left its first half second for a term to explain); ``base_params`` still
+#: override each entry.
 BASE_DEFAULTS: dict[str, dict[str, Any]] = {
-    "gamma": {"constraint": "sum_to_one", "fit_offset": False, "start_state": "zero",
+    "gamma": {"constraint": "sum_to_one", "fit_offset": False, "start_state": "fit",
               "threshold_fraction": 1.0 / 6.0},
     "linear": {"delay": 0},  # a searched delay would take up the latency looked for
     # the base keeps its physical loop form: the workflow's effects are what bend it, and a
@@ -630,6 +675,12 @@ BASE_DEFAULTS: dict[str, dict[str, Any]] = {
     "preisach": {"density_sign": "positive"},
     "coleman_hodgdon": {"b_sign": "negative"},
 }
+
+#: Families whose own fit starts every record at rest: as a base, each run starts where the
+#: identification record shows the plant starts (:class:`.bases.FromRecordStart`), as the
+#: Gamma base takes its fitted start position (``start_state="fit"``) and Preisach its fitted
+#: start. A plant that starts loaded is then clean, not ``unexplained``.
+STARTS_AT_REST = ("bouc_wen", "coleman_hodgdon")
 
 #: Bases identified in closed form (a least-squares solve): fast enough to search an effect's
 #: parameter on themselves. Any other base searches on ``play_sum`` (see ``screen``).
@@ -647,7 +698,7 @@ def base_factory_for(name: str, *, screen: bool = True,
     on which hysteresis model sits beneath it.
     """
     from hysteresis.base import make_family
-    from hysteresis.discrepancy.bases import LOCAL_BASES, PlaySumModel
+    from hysteresis.discrepancy.bases import LOCAL_BASES, FromRecordStart, PlaySumModel
     from hysteresis.discrepancy.effects import ScreenedFactory
 
     params = {**BASE_DEFAULTS.get(name, {}), **params}
@@ -655,7 +706,10 @@ def base_factory_for(name: str, *, screen: bool = True,
         cls = LOCAL_BASES[name]
         return lambda: cls(**params)
     make_family(name, **params)  # fail early on an unknown family or bad parameter
-    real: Callable[[], HysteresisModel] = lambda: make_family(name, **params)  # noqa: E731
+    family: Callable[[], HysteresisModel] = lambda: make_family(name, **params)  # noqa: E731
+    real = family
+    if name in STARTS_AT_REST:
+        real = lambda: FromRecordStart(family)  # noqa: E731
     if screen and name not in FAST_BASES:
         return ScreenedFactory(real, PlaySumModel)
     return real

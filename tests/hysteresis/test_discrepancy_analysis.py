@@ -19,6 +19,7 @@ from hysteresis.discrepancy.bases import AffineModel, PlaySumModel
 from hysteresis.discrepancy.effects import (
     CANDIDATES,
     EFFECT_NAMES,
+    NO_THETA,
     ComposedModel,
     Effect,
     Term,
@@ -453,13 +454,14 @@ def test_a_stop_clips_the_motion_the_mechanism_terms_shape():
                 tension=probe.tension)
     f = lambda: PlaySumModel(thresholds=(0.0, 0.3, 1.0))  # noqa: E731
     sse = lambda m: float(np.sum((r.y - m.predict(r)) ** 2))  # noqa: E731
-    inside = fit_with_effect(f, fit_with_effect(f, [], eff, r).terms, candidate("saturation"), r)
+    # the shift's own form (the asymmetry's one-way backlash: a step at the first motion)
+    shift_term = [Term(eff, NO_THETA, tuple(sorted(eff.context(r).items())))]
+    inside = fit_with_effect(f, shift_term, candidate("saturation"), r)
     assert [t.effect.name for t in inside.terms] == ["asymmetry", "saturation"]
     assert sse(inside) < 1e-3 * float(np.sum((r.y - r.y.mean()) ** 2))
     eff.before_stop = False  # the shift added after the stop
     try:
-        outside = fit_with_effect(f, fit_with_effect(f, [], eff, r).terms,
-                                  candidate("saturation"), r)
+        outside = fit_with_effect(f, shift_term, candidate("saturation"), r)
     finally:
         eff.before_stop = True
     assert sse(inside) < 0.2 * sse(outside)

@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hysteresis.discrepancy.inject import NOISE_MM, PLANTS, SIZES, inject
+from hysteresis.discrepancy.inject import NOISE_MM, REFERENCE_PLANTS, SIZES, inject
 
 
-@pytest.mark.parametrize("plant", PLANTS)
+@pytest.mark.parametrize("plant", REFERENCE_PLANTS)
 @pytest.mark.parametrize("strength", [1.0, 2.0])
 def test_injected_asymmetry_is_a_dead_zone_plus_an_offset(plant: str, strength: float) -> None:
     a = SIZES["asymmetry"] * strength

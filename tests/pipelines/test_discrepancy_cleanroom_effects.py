@@ -1,0 +1,60 @@
+"""The workflow on a few sources of the clean-room effect generator (``tests/cleanroom/
+effects.py``, written without our code): ``tsm-rig-log/1`` run folders, ingested as the stage
+does, one hidden effect form each. The whole matrix is measured by
+``python -m bench.bench_discrepancy --cleanroom``; here a few sources on one base keep it fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from pipelines.discrepancy import analyse, ingest_source, runs_from_dataset
+
+CLEANROOM = Path(__file__).resolve().parents[1] / "cleanroom"
+#: The base (as ``auto_families.gamma_free``): free play weights with an offset, start fitted.
+BASE = {"constraint": "free", "fit_offset": True}
+
+
+@pytest.fixture(scope="module")
+def generator() -> Any:
+    mp = pytest.MonkeyPatch()
+    mp.setenv("CLEANROOM_RIGLOG", str(CLEANROOM / "riglog.py"))
+    mp.syspath_prepend(str(CLEANROOM))
+    try:
+        yield importlib.import_module("effects")
+    finally:
+        mp.undo()
+
+
+def _answer(generator: Any, tmp: Path, plant: str, effect: str | None, form: str | None,
+            loaded: str | None = None) -> dict[str, Any]:
+    truth = generator.write_source(tmp / "src", plant, effect, form, "strong", loaded=loaded,
+                                   truth_file=False)
+    rows, meta, _ = ingest_source(tmp / "src" / truth["source_id"], tmp / "work")
+    runs = runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)
+    rep, _ = analyse(runs, base_family="gamma", base_params=BASE, auto_families={},
+                     base_check=False)
+    return rep
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("effect", "form", "named"), [
+    ("drift", "linear_creep", ("drift", "linear")),
+    ("latency", "pure_delay", ("time_delay", "latency")),
+])
+def test_a_hidden_form_is_named_with_its_effect(generator: Any, tmp_path: Path, effect: str,
+                                                form: str, named: tuple[str, str]) -> None:
+    rep = _answer(generator, tmp_path, "play_sum", effect, form)
+    first = rep["effects"][0]
+    assert (first["name"], first["form"]) == named
+    assert rep["summary"]["heldout_reduction"] >= 0.5
+
+
+@pytest.mark.slow
+def test_a_clean_plant_that_starts_loaded_names_nothing(generator: Any, tmp_path: Path) -> None:
+    rep = _answer(generator, tmp_path, "play_sum", None, None, loaded="above")
+    assert rep["effects"] == []
