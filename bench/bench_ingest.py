@@ -1,9 +1,9 @@
-"""Ingest throughput on the 72-run standard campaign (under 30 s), and ingest of big and
+"""Ingest throughput on the 120-run standard campaign (under 30 s), and ingest of big and
 hostile inputs (peak memory under 1 GB, raw files unchanged).
 
-The campaign comes from ``data/raw/virtual`` when ``make data`` has written it (72 runs);
-otherwise 8 runs of the standard campaign are simulated and each is written 9 times under a
-fresh run id (ingest cost does not depend on the physics, and simulating 72 runs would take
+The campaign comes from ``data/raw/virtual`` when ``make data`` has written it (120 runs);
+otherwise 8 runs of the standard campaign are simulated and each is written 15 times under a
+fresh run id (ingest cost does not depend on the physics, and simulating 120 runs would take
 minutes). Reported against two references measured in the same run: the I/O floor (plain
 ``pandas.read_csv`` of every stream of every run, no checks) and the filterpy Kalman backend
 (same ingest with ``kalman_backend=filterpy`` on the first 4 runs).
@@ -38,7 +38,7 @@ from rig_io.folder import write_run_folder
 from rig_io.synchronise import SyncOptions
 
 REPO = Path(__file__).resolve().parents[1]
-N_RUNS = 72
+N_RUNS = 120
 
 
 def _campaign(work: Path) -> tuple[Path, str]:

@@ -1,6 +1,6 @@
 """``make pipeline`` cold and warm, in a temporary folder: wall time and per-stage times.
 
-The cold run is exactly what a fresh clone does (the 72-run virtual campaign, ingest, 5
+The cold run is exactly what a fresh clone does (the 120-run virtual campaign, ingest, 5
 families x 24 configurations, validation, report, a new MLflow SQLite store); the warm run
 repeats it with nothing changed. Both run as ``python -m pipelines.run_all`` processes, so
 interpreter start-up and imports are counted. Target: cold < 90 s on 2 cores,

@@ -1,7 +1,7 @@
 """Virtual rig benchmark (`make bench`): the standard campaign's generation time and the rig's
 per-step cost, with the numba kernel against the same kernel run as plain Python.
 
-* ``campaign``: the 72 runs simulated and written as run folders into a temporary folder with
+* ``campaign``: the 120 runs simulated and written as run folders into a temporary folder with
   the generate stage's defaults (2 workers): wall time, and the workers' CPU seconds (the
   machine is shared, so wall time depends on the load; CPU time much less).
 * ``step``: cost of ``VirtualRig.step`` (one 10 ms control tick = 10 physics ticks, sensors

@@ -782,6 +782,8 @@ class MlflowSweepCallback(_HydraCallback):
             f"sweep:{task}",
             tags={"stage": task, "kind": "parent", "sweep": "true",
                   "sweep_dir": config.hydra.sweep.dir, "overrides": " ".join(overrides)},
+            note=f"A Hydra sweep of {task} ({' '.join(overrides) or 'no overrides'}): the "
+                 "runs of every job of the sweep are its children.",
         )
         sweep_dir = Path(config.hydra.sweep.dir)
         sweep_dir.mkdir(parents=True, exist_ok=True)

@@ -42,6 +42,7 @@ def test_sixteen_job_sweep_lands_under_one_parent(tmp_path: Path) -> None:
     assert len(parents) == 1 and len(runs) == 17
     parent = parents[0]
     assert parent.data.tags["sweep"] == "true" and parent.info.status == "FINISHED"
+    assert parent.data.tags["mlflow.note.content"].startswith("A Hydra sweep of fit (")
     assert (tmp_path / "multirun" / "mlflow_parent_run_id").read_text() == parent.info.run_id
     assert len(children) == 16
     assert {r.data.tags["mlflow.parentRunId"] for r in children} == {parent.info.run_id}
