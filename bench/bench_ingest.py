@@ -58,7 +58,7 @@ def _campaign(work: Path) -> tuple[Path, str]:
             write_run_folder(RawRun(manifest=manifest, encoder=run.encoder,
                                     loadcell=run.loadcell, camera=run.camera,
                                     tracker=run.tracker, events=run.events), src)
-    return src, "8 simulated standard-campaign runs x 9 run ids"
+    return src, f"8 simulated standard-campaign runs x {N_RUNS // len(picked)} run ids"
 
 
 def _io_floor(src: Path) -> float:
