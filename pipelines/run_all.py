@@ -351,7 +351,8 @@ def _run_stages(cfg: Mapping[str, Any], paths: Paths, tracker: Any, result: Pipe
             if tracking_state.parent is None and _outputs_changed(result):
                 tracking_state.parent = _open_parent(
                     tracker, cfg, paths, result, state, started,
-                    tags={"up_to_date": "true", "same_as": tracking_state.same_as})
+                    tags={**tracking_state.tags, "up_to_date": "true",
+                          "same_as": tracking_state.same_as})
             if tracking_state.parent is not None:
                 _track_finish(tracker, tracking_state, result)
             else:
@@ -393,6 +394,8 @@ class TrackState:
     seconds: float = 0.0
     #: the run that already holds these results, when nothing changed
     same_as: str = ""
+    #: what identifies the results (dataset hash, pipeline key): every parent run carries it
+    tags: dict[str, str] = field(default_factory=dict)
 
 
 def _outputs_changed(result: PipelineResult) -> bool:
@@ -426,9 +429,9 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
         f"tags.pipeline_key = '{key}' and tags.complete = 'true'")
     if previous:  # nothing new to log, unless the report or the shape study changed
         return TrackState(None, True, seconds=time.perf_counter() - start,
-                          same_as=previous[0].info.run_id)
+                          same_as=previous[0].info.run_id, tags=tags)
     parent = _open_parent(tracker, cfg, paths, result, progress, started, tags=tags)
-    state = TrackState(parent, False)
+    state = TrackState(parent, False, tags=tags)
     units = dataset_units(paths.processed)
     hydra_dir = hydra_output_dir()
     if fits is not None:
@@ -452,14 +455,14 @@ def _track_start(tracker: Any, cfg: Mapping[str, Any], fit_cfg: Mapping[str, Any
 def _open_parent(tracker: Any, cfg: Mapping[str, Any], paths: Paths, result: PipelineResult,
                  progress: _Progress, started: float | None, *,
                  tags: Mapping[str, str]) -> str:
-    """The pipeline's parent run, started at ``started``, with its params, data and tables."""
+    """The pipeline's parent run, started at ``started``, with its params, data and tables;
+    ``tags`` carry the dataset hash and the pipeline key (hashed once, by the caller)."""
     from pipelines import lineage, tracking
 
     fits, metrics = result.fits, result.metrics
-    data_hash = dataset_hash(paths.processed)
     params = tracking.flatten({k: v for k, v in cfg.items() if k != "tracking"})
     parent = tracker.start_run("pipeline", tags={"stage": "pipeline", "kind": "parent",
-                                                 "dataset_hash": data_hash, **tags},
+                                                 **tags},
                                note=_pipeline_note(cfg, fits, paths), start_time=started)
     progress.parent = parent  # from here on a failure anywhere ends this run FAILED
     tracker.log(parent, params=params)

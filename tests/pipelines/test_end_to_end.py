@@ -92,5 +92,6 @@ def test_small_pipeline_end_to_end_and_incremental_rerun(tmp_path: Path) -> None
     assert third.report is not None and not third.report.cached
     pointer = client.get_run(third.parent_run_id)
     assert pointer.data.tags["same_as"] == first.parent_run_id
+    assert pointer.data.tags["dataset_hash"] == parent.data.tags["dataset_hash"]
     assert len(client.search_runs([exp.experiment_id])) == 6
     pd.testing.assert_frame_equal(pd.read_parquet(reports / "metrics.parquet"), metrics)
