@@ -19,9 +19,10 @@ through :func:`with_defaults`, so a hand-written config gets the same defaults a
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
@@ -33,6 +34,7 @@ from rig_io.synchronise import SyncOptions
 #: Config group of the discrepancy workflow's knobs (``conf/discrepancy.yaml``:
 #: ``- workflow_schema@workflow: workflow``).
 WORKFLOW_GROUP = "workflow_schema"
+T = TypeVar("T")
 
 #: Kinds scored as held out by default (validate's ``heldout``, unseen_shape's
 #: ``eval_excitations``). mixed_sine and band_random are evaluation-only: the campaign records
@@ -796,6 +798,39 @@ def with_defaults(schema: type[Any], cfg: Mapping[str, Any]) -> dict[str, Any]:
     plain = OmegaConf.to_container(node, resolve=True)
     assert isinstance(plain, dict)
     return {str(k): v for k, v in plain.items() if str(k) not in unset}
+
+
+def settings(schema: type[T], cfg: Any) -> T:
+    """A stage's typed settings: ``cfg`` (a composed DictConfig, a hand-written mapping or
+    already a ``schema`` instance) merged over ``schema``'s defaults, checked against its
+    types and converted once with ``OmegaConf.to_object``.
+
+    Keys ``schema`` does not know are dropped here (one plain config may serve several
+    stages; the composed config was already checked by Hydra and the command-line guard).
+    Group fields typed ``Any`` (``paths``, ``tracking``) stay plain dicts, None when not
+    given. A mistyped value
+    raises :class:`omegaconf.errors.ValidationError` (a ``ValueError``) naming the key.
+    """
+    if isinstance(cfg, schema):
+        return cfg
+    if isinstance(cfg, DictConfig):
+        plain = OmegaConf.to_container(cfg, resolve=True)
+        assert isinstance(plain, dict)
+        cfg = plain
+    node = schema_node(schema)
+    names = {f.name for f in dataclasses.fields(schema)}  # type: ignore[arg-type]
+    known = {k: v for k, v in dict(cfg).items() if k in names}
+    _clear_given_mappings(node, known)
+    node.merge_with(known)
+    for key in names:
+        child = node._get_node(key)
+        if OmegaConf.is_missing(node, key) and child is not None \
+                and child._metadata.ref_type is Any:
+            node[key] = None  # a group not given (``tracking`` in a test): None, not a crash
+    OmegaConf.resolve(node)
+    obj = OmegaConf.to_object(node)
+    assert isinstance(obj, schema)
+    return obj
 
 
 def _clear_given_mappings(node: DictConfig, cfg: Mapping[str, Any]) -> None:
