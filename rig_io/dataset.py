@@ -72,6 +72,28 @@ def write_run_rows(out: str | os.PathLike[str], frame: pd.DataFrame,
     return target
 
 
+def _dataset_files(p: Path, runs: list[str] | None) -> list[Path]:
+    """The parquet files of a dataset folder (only ``runs``' when given) or the one file."""
+    if p.is_file():
+        return [p]
+    if not p.is_dir():
+        raise RigIOError("dataset does not exist", file=str(p))
+    files = sorted(p.glob("*.parquet"))
+    nested = sorted(str(f.relative_to(p)) for f in p.rglob("*.parquet") if f.parent != p)
+    if nested:
+        raise RigIOError(f"parquet files in subfolders of the dataset ({nested[:5]}): run "
+                         "ids must be plain names; re-ingest into a fresh folder", file=str(p))
+    if runs is not None:
+        wanted = {safe_part(r, what="run_id") for r in runs}
+        files = [f for f in files if f.stem in wanted]
+        missing = sorted(wanted - {f.stem for f in files})
+        if missing:
+            raise RigIOError(f"run(s) {missing[:10]} not in dataset", file=str(p))
+    if not files:
+        raise RigIOError("no runs in dataset", file=str(p))
+    return files
+
+
 def read_dataset(path: str | os.PathLike[str], *, runs: list[str] | None = None,
                  validate_rows: bool = True,
                  columns: Sequence[str] | None = None) -> pd.DataFrame:
@@ -89,24 +111,7 @@ def read_dataset(path: str | os.PathLike[str], *, runs: list[str] | None = None,
     p = Path(path)
     if p.is_dir() and (p / SAMPLES).is_dir():
         p = p / SAMPLES
-    if p.is_dir():
-        files = sorted(p.glob("*.parquet"))
-        nested = sorted(str(f.relative_to(p)) for f in p.rglob("*.parquet") if f.parent != p)
-        if nested:
-            raise RigIOError(f"parquet files in subfolders of the dataset ({nested[:5]}): run "
-                             "ids must be plain names; re-ingest into a fresh folder", file=str(p))
-        if runs is not None:
-            wanted = {safe_part(r, what="run_id") for r in runs}
-            files = [f for f in files if f.stem in wanted]
-            missing = sorted(wanted - {f.stem for f in files})
-            if missing:
-                raise RigIOError(f"run(s) {missing[:10]} not in dataset", file=str(p))
-        if not files:
-            raise RigIOError("no runs in dataset", file=str(p))
-    elif p.is_file():
-        files = [p]
-    else:
-        raise RigIOError("dataset does not exist", file=str(p))
+    files = _dataset_files(p, runs)
     try:
         tables = [pq.read_table(f, schema=ARROW_SCHEMA, columns=list(keep)) for f in files]
     except (OSError, pa.ArrowException) as err:

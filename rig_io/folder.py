@@ -15,6 +15,7 @@ import io
 import json
 import os
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -321,70 +322,88 @@ def _typed(frame: pd.DataFrame, name: str, *, run: str, file: str) -> pd.DataFra
     out: dict[str, Any] = {}
     required = _REQUIRED_VALUES[name]
     for col in STREAM_COLUMNS[name]:
+        cell = _CellError(run=run, file=file, key=col)
         raw = frame[col]
         if name == "events" and col != "t_ns":
-            values = raw.astype(object).where(raw.notna(), "").astype(str)
-            if col == "event":
-                bad = np.flatnonzero(~values.isin(EVENT_KINDS).to_numpy())
-                if bad.size:
-                    i = int(bad[0])
-                    raise RigIOError(f"unknown event {short(values.iloc[i])} "
-                                     f"(expected one of {', '.join(EVENT_KINDS)})",
-                                     run=run, file=file, row=i + checks.FIRST_DATA_LINE,
-                                     key=col)
-            out[col] = values.to_numpy(dtype=object)
+            out[col] = _event_column(raw, col, cell)
             continue
         empty = raw.isna().to_numpy()
-        if raw.dtype == bool:  # a column of True/False: words, not numbers
-            raise RigIOError(f"non-numeric value {short(raw.iloc[0])} in column {col}",
-                             run=run, file=file, row=checks.FIRST_DATA_LINE, key=col)
-        exact_int = raw.dtype == np.int64
-        if raw.dtype == np.uint64:  # only values beyond int64 make pandas choose uint64
-            num = raw.to_numpy(dtype=float)
-        elif pd.api.types.is_numeric_dtype(raw.dtype) and raw.dtype != bool:
-            num = raw.to_numpy(dtype=float, na_value=np.nan)
-        else:  # the C parser found something that is not a number somewhere
-            num = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
-            bad = np.flatnonzero(~empty & ~np.isfinite(num))
-            if bad.size:
-                i = int(bad[0])
-                raise RigIOError(f"non-numeric value {short(raw.iloc[i])} in column {col}",
-                                 run=run, file=file, row=i + checks.FIRST_DATA_LINE, key=col)
-        bad = np.flatnonzero(~empty & ~np.isfinite(num))
-        if bad.size:
-            i = int(bad[0])
-            raise RigIOError(f"non-finite value {short(raw.iloc[i])} in column {col}",
-                             run=run, file=file, row=i + checks.FIRST_DATA_LINE, key=col)
+        num = _numbers(raw, empty, col, cell)
         if col in required or (col == "output_counts" and 0 < empty.sum() < len(empty)):
             holes = np.flatnonzero(empty)
             if holes.size:
-                i = int(holes[0])
-                raise RigIOError(f"empty value in column {col}", run=run, file=file,
-                                 row=i + checks.FIRST_DATA_LINE, key=col)
-        if col in _INTEGER:
-            ok = ~empty
-            if not exact_int:
-                huge = ok & (np.abs(np.where(ok, num, 0.0)) >= _INT64_LIMIT)
-                if huge.any():
-                    i = int(np.flatnonzero(huge)[0])
-                    raise RigIOError(f"value {short(raw.iloc[i])} in column {col} is beyond "
-                                     "the 64-bit integer range", run=run, file=file,
-                                     row=i + checks.FIRST_DATA_LINE, key=col)
-            frac = ok & (num != np.round(num))
-            if frac.any():
-                i = int(np.flatnonzero(frac)[0])
-                raise RigIOError(f"non-integer value {short(raw.iloc[i])} in column {col}",
-                                 run=run, file=file, row=i + checks.FIRST_DATA_LINE, key=col)
-            if exact_int:
-                out[col] = raw.to_numpy()  # exact, even beyond 2**53
-            elif empty.any():
-                out[col] = pd.array(np.where(ok, num, 0).astype(np.int64), dtype="Int64")
-                out[col][~ok] = pd.NA
-            else:
-                out[col] = np.round(num).astype(np.int64)
-        else:
-            out[col] = num
+                raise cell(f"empty value in column {col}", int(holes[0]))
+        out[col] = _integers(raw, num, empty, col, cell) if col in _INTEGER else num
     result = pd.DataFrame(out)
     if name == "encoder":
         result["output_counts"] = result["output_counts"].astype("Int64")
     return result
+
+
+@dataclass(frozen=True)
+class _CellError:
+    """Builds the error naming one bad cell of a stream column (its data row from 0)."""
+
+    run: str
+    file: str
+    key: str
+
+    def __call__(self, message: str, i: int) -> RigIOError:
+        return RigIOError(message, run=self.run, file=self.file,
+                          row=i + checks.FIRST_DATA_LINE, key=self.key)
+
+
+def _event_column(raw: pd.Series, col: str, cell: _CellError) -> np.ndarray:
+    values = raw.astype(object).where(raw.notna(), "").astype(str)
+    if col == "event":
+        bad = np.flatnonzero(~values.isin(EVENT_KINDS).to_numpy())
+        if bad.size:
+            i = int(bad[0])
+            raise cell(f"unknown event {short(values.iloc[i])} "
+                       f"(expected one of {', '.join(EVENT_KINDS)})", i)
+    return np.asarray(values.to_numpy(dtype=object))
+
+
+def _numbers(raw: pd.Series, empty: np.ndarray, col: str, cell: _CellError) -> np.ndarray:
+    """A column as floats (NaN where empty); a word or a non-finite value is refused."""
+    if raw.dtype == bool:  # a column of True/False: words, not numbers
+        raise cell(f"non-numeric value {short(raw.iloc[0])} in column {col}", 0)
+    if raw.dtype == np.uint64:  # only values beyond int64 make pandas choose uint64
+        num = raw.to_numpy(dtype=float)
+    elif pd.api.types.is_numeric_dtype(raw.dtype):
+        num = raw.to_numpy(dtype=float, na_value=np.nan)
+    else:  # the C parser found something that is not a number somewhere
+        num = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
+        bad = np.flatnonzero(~empty & ~np.isfinite(num))
+        if bad.size:
+            i = int(bad[0])
+            raise cell(f"non-numeric value {short(raw.iloc[i])} in column {col}", i)
+    bad = np.flatnonzero(~empty & ~np.isfinite(num))
+    if bad.size:
+        i = int(bad[0])
+        raise cell(f"non-finite value {short(raw.iloc[i])} in column {col}", i)
+    return np.asarray(num, dtype=float)
+
+
+def _integers(raw: pd.Series, num: np.ndarray, empty: np.ndarray, col: str,
+              cell: _CellError) -> Any:
+    """An integer column: exact where pandas read int64, else checked in range and whole."""
+    exact_int = raw.dtype == np.int64
+    ok = ~empty
+    if not exact_int:
+        huge = ok & (np.abs(np.where(ok, num, 0.0)) >= _INT64_LIMIT)
+        if huge.any():
+            i = int(np.flatnonzero(huge)[0])
+            raise cell(f"value {short(raw.iloc[i])} in column {col} is beyond "
+                       "the 64-bit integer range", i)
+    frac = ok & (num != np.round(num))
+    if frac.any():
+        i = int(np.flatnonzero(frac)[0])
+        raise cell(f"non-integer value {short(raw.iloc[i])} in column {col}", i)
+    if exact_int:
+        return raw.to_numpy()  # exact, even beyond 2**53
+    if empty.any():
+        ints = pd.array(np.where(ok, num, 0).astype(np.int64), dtype="Int64")
+        ints[~ok] = pd.NA
+        return ints
+    return np.round(num).astype(np.int64)

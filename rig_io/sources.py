@@ -63,16 +63,7 @@ def discover(root: str | os.PathLike[str], *,
              mapping: dict[str, Any] | None = None) -> list[Source]:
     """All raw runs under ``root`` (sorted by path)."""
     root = Path(root)
-    if root.is_file() and root.suffix == ".bag":
-        raise RigIOError("source is a single bag file; give the folder that holds the runs",
-                         file=str(root))
-    if not root.is_dir():
-        raise RigIOError("source folder does not exist", file=str(root))
-    # A run folder given as the source would be searched for runs inside it and give none.
-    if (root / "metadata.yaml").exists() or _looks_like_run_folder(root):
-        raise RigIOError("source is itself a run (it holds manifest.json, stream files or "
-                         "metadata.yaml); give the folder that holds the runs",
-                         file=str(root))
+    _check_source_root(root)
     found: list[Source] = []
     seen: set[Path] = set()
 
@@ -84,26 +75,47 @@ def discover(root: str | os.PathLike[str], *,
         for p in sorted(folder.iterdir()):
             if p.name.startswith("."):
                 continue
-            if p.is_dir():
-                if (p / "metadata.yaml").exists():
-                    files = sorted(f for f in p.iterdir() if _is_regular(f))
-                    side = sidecar_manifest(p)
-                    found.append(Source("rosbag2", p, tuple(files + ([side] if side.exists()
-                                                                      else []))))
-                elif _looks_like_run_folder(p):
-                    found.append(Source("folder", p, tuple(sorted(
-                        f for f in p.iterdir()
-                        if _is_regular(f) and not f.name.startswith(".")))))
-                else:
-                    walk(p)
-            elif p.suffix == ".bag":
-                side = sidecar_manifest(p)
-                found.append(Source("rosbag1", p, (p, side) if side.exists() else (p,)))
-            elif mapping is not None and matches(mapping, p):
-                found.append(Source("import", p, (p,)))
+            source = _source_at(p, mapping)
+            if source is not None:
+                found.append(source)
+            elif p.is_dir():
+                walk(p)
 
     walk(root)
     return found
+
+
+def _check_source_root(root: Path) -> None:
+    if root.is_file() and root.suffix == ".bag":
+        raise RigIOError("source is a single bag file; give the folder that holds the runs",
+                         file=str(root))
+    if not root.is_dir():
+        raise RigIOError("source folder does not exist", file=str(root))
+    # A run folder given as the source would be searched for runs inside it and give none.
+    if (root / "metadata.yaml").exists() or _looks_like_run_folder(root):
+        raise RigIOError("source is itself a run (it holds manifest.json, stream files or "
+                         "metadata.yaml); give the folder that holds the runs",
+                         file=str(root))
+
+
+def _source_at(p: Path, mapping: dict[str, Any] | None) -> Source | None:
+    """The run at ``p`` (a rosbag2 or run folder, a rosbag1, a mapped foreign file), or None
+    (a folder to search further, or a file that is no run)."""
+    if p.is_dir():
+        if (p / "metadata.yaml").exists():
+            files = sorted(f for f in p.iterdir() if _is_regular(f))
+            side = sidecar_manifest(p)
+            return Source("rosbag2", p, tuple(files + ([side] if side.exists() else [])))
+        if _looks_like_run_folder(p):
+            return Source("folder", p, tuple(sorted(
+                f for f in p.iterdir() if _is_regular(f) and not f.name.startswith("."))))
+        return None
+    if p.suffix == ".bag":
+        side = sidecar_manifest(p)
+        return Source("rosbag1", p, (p, side) if side.exists() else (p,))
+    if mapping is not None and matches(mapping, p):
+        return Source("import", p, (p,))
+    return None
 
 
 def hash_files(files: tuple[Path, ...], *, root: Path) -> tuple[str, dict[str, str]]:

@@ -215,6 +215,14 @@ def _kalman_filterpy(values: FloatArray, dts: FloatArray, r: FloatArray, q: floa
 def _kalman_numba(z: FloatArray, dts: FloatArray, r: FloatArray, q: float,
                   r0: float) -> tuple[FloatArray, FloatArray]:
     """filterpy's predict/update + RTS smoother, written out for the 2-state model."""
+    xm, pm = _kalman_forward(z, dts, r, q, r0)
+    return _rts_backward(xm, pm, dts, q)
+
+
+@numba.njit(cache=True)  # type: ignore[untyped-decorator,misc,unused-ignore]
+def _kalman_forward(z: FloatArray, dts: FloatArray, r: FloatArray, q: float,
+                    r0: float) -> tuple[FloatArray, FloatArray]:
+    """The filter pass: (state means, covariances) after each update."""
     n = z.size
     xm = np.empty((n, 2))
     pm = np.empty((n, 2, 2))
@@ -244,6 +252,14 @@ def _kalman_numba(z: FloatArray, dts: FloatArray, r: FloatArray, q: float,
         p00, p01, p11 = b00, b01, b11
         xm[k, 0], xm[k, 1] = x0, x1
         pm[k, 0, 0], pm[k, 0, 1], pm[k, 1, 0], pm[k, 1, 1] = p00, p01, p01, p11
+    return xm, pm
+
+
+@numba.njit(cache=True)  # type: ignore[untyped-decorator,misc,unused-ignore]
+def _rts_backward(xm: FloatArray, pm: FloatArray, dts: FloatArray,
+                  q: float) -> tuple[FloatArray, FloatArray]:
+    """The RTS smoother pass over the filter's means and covariances: (position, speed)."""
+    n = xm.shape[0]
     xs = xm.copy()
     ps = pm.copy()
     for k in range(n - 2, -1, -1):
@@ -306,42 +322,62 @@ def synchronise(run: PhysicalRun, options: SyncOptions | None = None) -> SyncedR
         tt, vt, _ = confident_frames(run.tracker)
         ch["tracker"] = interp_stream(tt, vt, t_ns.astype(float))
     if run.camera is not None:
-        tc, vc, cc = confident_frames(run.camera)
-        if tc.size == 0:
-            raise RigIOError("no confident camera frame", run=run.run_id, file=run.file("camera"))
-        # Frames on another clock would be held constant over the whole run by the smoother.
-        t_end = float(t_ns[-1])
-        slack = opt.max_latency_ms * 1e6
-        if not np.any((tc >= t0) & (tc <= t_end + slack)):
-            raise RigIOError(f"no confident camera frame within the encoder's span "
-                             f"(frames t={tc[0] / 1e9:.3f}..{tc[-1] / 1e9:.3f} s, encoder "
-                             f"t={t0 / 1e9:.3f}..{t_end / 1e9:.3f} s)", run=run.run_id,
-                             file=run.file("camera"))
-        cam = run.manifest.get("channels", {}).get("camera") or {}
-        nominal_ms = cam.get("nominal_latency_ms")
-        tcs = (tc - t0) / 1e9
-        latency_s, method, corr = float("nan"), "nominal", float("nan")
-        reference = None
-        if "tracker" in ch and np.isfinite(ch["tracker"]).sum() > 10:
-            reference = ("tracker", ch["tracker"])
-        elif np.isfinite(ch["output_encoder"]).sum() > 10:
-            reference = ("output_encoder", ch["output_encoder"])
-        if reference is not None and tc.size >= 20:
-            lat, corr = estimate_latency(tcs, vc, t_s, reference[1],
-                                         max_latency_s=opt.max_latency_ms / 1e3,
-                                         step_s=opt.latency_step_ms / 1e3)
-            if np.isfinite(lat) and corr >= opt.min_correlation:
-                latency_s, method = lat, f"cross_correlation:{reference[0]}"
-        if method == "nominal":
-            if nominal_ms is None:
-                latency_s, method = 0.0, "none"
-            else:
-                latency_s = float(nominal_ms) / 1e3
-        ch["camera"] = kalman_upsample(tcs - latency_s, vc, cc, t_s,
-                                       process_noise_scale=opt.process_noise_scale,
-                                       measurement_var=opt.measurement_var,
-                                       backend=opt.kalman_backend)
-        info.update(camera_latency_ms=latency_s * 1e3, camera_latency_method=method,
-                    camera_latency_correlation=None if not np.isfinite(corr) else corr,
-                    camera_frames_used=int(tc.size), camera_frames=int(len(run.camera)))
+        ch["camera"], camera_info = _camera_channel(run, ch, t_ns, t_s, opt)
+        info.update(camera_info)
     return SyncedRun(t_s=t_s, channels=ch, info=info)
+
+
+def _camera_channel(run: PhysicalRun, ch: dict[str, FloatArray], t_ns: np.ndarray,
+                    t_s: FloatArray, opt: SyncOptions) -> tuple[FloatArray, dict[str, Any]]:
+    """The camera's confident frames, latency-corrected and Kalman-smoothed onto the encoder
+    time base, and what was found about its latency."""
+    assert run.camera is not None
+    t0 = int(t_ns[0])
+    tc, vc, cc = confident_frames(run.camera)
+    if tc.size == 0:
+        raise RigIOError("no confident camera frame", run=run.run_id, file=run.file("camera"))
+    # Frames on another clock would be held constant over the whole run by the smoother.
+    t_end = float(t_ns[-1])
+    slack = opt.max_latency_ms * 1e6
+    if not np.any((tc >= t0) & (tc <= t_end + slack)):
+        raise RigIOError(f"no confident camera frame within the encoder's span "
+                         f"(frames t={tc[0] / 1e9:.3f}..{tc[-1] / 1e9:.3f} s, encoder "
+                         f"t={t0 / 1e9:.3f}..{t_end / 1e9:.3f} s)", run=run.run_id,
+                         file=run.file("camera"))
+    tcs = (tc - t0) / 1e9
+    latency_s, method, corr = _camera_latency(run, ch, tcs, vc, t_s, opt)
+    smooth = kalman_upsample(tcs - latency_s, vc, cc, t_s,
+                             process_noise_scale=opt.process_noise_scale,
+                             measurement_var=opt.measurement_var,
+                             backend=opt.kalman_backend)
+    info = dict(camera_latency_ms=latency_s * 1e3, camera_latency_method=method,
+                camera_latency_correlation=None if not np.isfinite(corr) else corr,
+                camera_frames_used=int(tc.size), camera_frames=int(len(run.camera)))
+    return smooth, info
+
+
+def _camera_latency(run: PhysicalRun, ch: dict[str, FloatArray], tcs: FloatArray,
+                    vc: FloatArray, t_s: FloatArray, opt: SyncOptions
+                    ) -> tuple[float, str, float]:
+    """(latency in s, how it was found, correlation): cross-correlation with the tracker or
+    the output encoder where that is confident, else the manifest's nominal latency."""
+    cam = run.manifest.get("channels", {}).get("camera") or {}
+    nominal_ms = cam.get("nominal_latency_ms")
+    latency_s, method, corr = float("nan"), "nominal", float("nan")
+    reference = None
+    if "tracker" in ch and np.isfinite(ch["tracker"]).sum() > 10:
+        reference = ("tracker", ch["tracker"])
+    elif np.isfinite(ch["output_encoder"]).sum() > 10:
+        reference = ("output_encoder", ch["output_encoder"])
+    if reference is not None and tcs.size >= 20:
+        lat, corr = estimate_latency(tcs, vc, t_s, reference[1],
+                                     max_latency_s=opt.max_latency_ms / 1e3,
+                                     step_s=opt.latency_step_ms / 1e3)
+        if np.isfinite(lat) and corr >= opt.min_correlation:
+            latency_s, method = lat, f"cross_correlation:{reference[0]}"
+    if method == "nominal":
+        if nominal_ms is None:
+            latency_s, method = 0.0, "none"
+        else:
+            latency_s = float(nominal_ms) / 1e3
+    return latency_s, method, corr

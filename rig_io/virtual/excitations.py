@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -172,74 +172,93 @@ def make_excitation(kind: str, *, dt_s: float = 0.01, **params: Any
     """
     check_excitation(kind, params)
     dt = _positive("dt_s", dt_s)
-    if kind in ("sine_decay", "sine_decay_offset"):
-        amps = _amplitudes(params["amplitudes_mm"])
-        n_per = int(params["periods_per_amplitude"])
-        f = _positive("frequency_hz", params["frequency_hz"])
-        if n_per < 1:
-            raise ValueError("'periods_per_amplitude' must be >= 1")
-        t, y = _decay_periods(amps, n_per, lambda a: 1.0 / f,
-                              lambda tau, a, per: a * np.sin(2 * np.pi * tau / per), dt)
-        if kind == "sine_decay_offset":
-            y = y + float(params["offset"])
-        return t, y
-    if kind in ("triangle_decay", "trapezoid_decay"):
-        amps = _amplitudes(params["amplitudes_mm"])
-        n_per = int(params["periods_per_amplitude"])
-        v = _positive("slope_mm_s", params["slope_mm_s"])
-        if n_per < 1:
-            raise ValueError("'periods_per_amplitude' must be >= 1")
-        if kind == "triangle_decay":
-            return _decay_periods(amps, n_per, lambda a: 4 * a / v, _triangle, dt)
-        dwell = float(params["dwell_s"])
-        if dwell < 0:
-            raise ValueError("'dwell_s' must be >= 0")
+    build = _BUILDERS.get(kind, _free)
+    return build(kind, params, dt)
 
-        def trapezoid(tau: FloatArray, a: float, per: float) -> FloatArray:
-            ramp = a / v
-            knots_t = np.cumsum([0, ramp, dwell, 2 * ramp, dwell, ramp])
-            knots_y = [0, a, a, -a, -a, 0]
-            return np.interp(tau, knots_t, knots_y)
 
-        return _decay_periods(amps, n_per, lambda a: 4 * a / v + 2 * dwell, trapezoid, dt)
-    if kind == "ramp":
-        v = float(params["velocity_mm_s"])
-        stroke = float(params["stroke_mm"])
-        if v == 0 or not np.isfinite(v):
-            raise ValueError("'velocity_mm_s' must be non-zero")
-        dwell = float(params.get("dwell_s", 1.0))
-        t_ramp = abs(stroke / v)
-        t = _sample(dwell + t_ramp + dwell, dt)
-        y = np.clip((t - dwell) * abs(v), 0.0, abs(stroke)) * np.sign(stroke)
-        return t, y
-    if kind == "sine":
-        a = float(params["amplitude"])
-        off = float(params["offset"])
-        f = _positive("frequency_hz", params["frequency_hz"])
-        dur = _positive("duration_s", params.get("duration_s", 5.0 / f))
-        t = _sample(dur, dt)
-        # Eases in from rest at the offset: the rig starts where the sine starts.
-        return t, off + a * np.sin(2 * np.pi * f * t)
-    if kind == "mixed_sine":
-        terms = params["terms"]
-        if not isinstance(terms, Sequence) or len(terms) == 0:
-            raise ValueError("'terms' must be a non-empty list of {amplitude, frequency_hz, "
-                             "phase_rad}")
-        fmin = min(_positive("frequency_hz", tm["frequency_hz"]) for tm in terms)
-        dur = _positive("duration_s", params.get("duration_s", 2.0 / fmin))
-        t = _sample(dur, dt)
-        y = np.zeros_like(t)
-        for tm in terms:
-            y += float(tm["amplitude"]) * (np.sin(2 * np.pi * float(tm["frequency_hz"]) * t
-                                                  + float(tm.get("phase_rad", 0.0)))
-                                           - np.sin(float(tm.get("phase_rad", 0.0))))
-        return t, y
-    if kind == "band_random":
-        t = _sample(_positive("duration_s", params["duration_s"]), dt)
-        opts = {k: params[k] for k in _OPTIONAL["band_random"] if k in params}
-        return t, band_random(t, amplitude_mm=params["amplitude_mm"], band_hz=params["band_hz"],
-                              seed=params["seed"], **opts)
-    # free: given samples, resampled to the control rate
+def _sine_decay(kind: str, params: dict[str, Any], dt: float) -> tuple[FloatArray, FloatArray]:
+    amps = _amplitudes(params["amplitudes_mm"])
+    n_per = int(params["periods_per_amplitude"])
+    f = _positive("frequency_hz", params["frequency_hz"])
+    if n_per < 1:
+        raise ValueError("'periods_per_amplitude' must be >= 1")
+    t, y = _decay_periods(amps, n_per, lambda a: 1.0 / f,
+                          lambda tau, a, per: a * np.sin(2 * np.pi * tau / per), dt)
+    if kind == "sine_decay_offset":
+        y = y + float(params["offset"])
+    return t, y
+
+
+def _triangle_or_trapezoid(kind: str, params: dict[str, Any], dt: float
+                           ) -> tuple[FloatArray, FloatArray]:
+    amps = _amplitudes(params["amplitudes_mm"])
+    n_per = int(params["periods_per_amplitude"])
+    v = _positive("slope_mm_s", params["slope_mm_s"])
+    if n_per < 1:
+        raise ValueError("'periods_per_amplitude' must be >= 1")
+    if kind == "triangle_decay":
+        return _decay_periods(amps, n_per, lambda a: 4 * a / v, _triangle, dt)
+    dwell = float(params["dwell_s"])
+    if dwell < 0:
+        raise ValueError("'dwell_s' must be >= 0")
+
+    def trapezoid(tau: FloatArray, a: float, per: float) -> FloatArray:
+        ramp = a / v
+        knots_t = np.cumsum([0, ramp, dwell, 2 * ramp, dwell, ramp])
+        knots_y = [0, a, a, -a, -a, 0]
+        return np.interp(tau, knots_t, knots_y)
+
+    return _decay_periods(amps, n_per, lambda a: 4 * a / v + 2 * dwell, trapezoid, dt)
+
+
+def _ramp(kind: str, params: dict[str, Any], dt: float) -> tuple[FloatArray, FloatArray]:
+    v = float(params["velocity_mm_s"])
+    stroke = float(params["stroke_mm"])
+    if v == 0 or not np.isfinite(v):
+        raise ValueError("'velocity_mm_s' must be non-zero")
+    dwell = float(params.get("dwell_s", 1.0))
+    t_ramp = abs(stroke / v)
+    t = _sample(dwell + t_ramp + dwell, dt)
+    y = np.clip((t - dwell) * abs(v), 0.0, abs(stroke)) * np.sign(stroke)
+    return t, y
+
+
+def _sine(kind: str, params: dict[str, Any], dt: float) -> tuple[FloatArray, FloatArray]:
+    a = float(params["amplitude"])
+    off = float(params["offset"])
+    f = _positive("frequency_hz", params["frequency_hz"])
+    dur = _positive("duration_s", params.get("duration_s", 5.0 / f))
+    t = _sample(dur, dt)
+    # Eases in from rest at the offset: the rig starts where the sine starts.
+    return t, off + a * np.sin(2 * np.pi * f * t)
+
+
+def _mixed_sine(kind: str, params: dict[str, Any], dt: float) -> tuple[FloatArray, FloatArray]:
+    terms = params["terms"]
+    if not isinstance(terms, Sequence) or len(terms) == 0:
+        raise ValueError("'terms' must be a non-empty list of {amplitude, frequency_hz, "
+                         "phase_rad}")
+    fmin = min(_positive("frequency_hz", tm["frequency_hz"]) for tm in terms)
+    dur = _positive("duration_s", params.get("duration_s", 2.0 / fmin))
+    t = _sample(dur, dt)
+    y = np.zeros_like(t)
+    for tm in terms:
+        y += float(tm["amplitude"]) * (np.sin(2 * np.pi * float(tm["frequency_hz"]) * t
+                                              + float(tm.get("phase_rad", 0.0)))
+                                       - np.sin(float(tm.get("phase_rad", 0.0))))
+    return t, y
+
+
+def _band_random(kind: str, params: dict[str, Any], dt: float
+                 ) -> tuple[FloatArray, FloatArray]:
+    t = _sample(_positive("duration_s", params["duration_s"]), dt)
+    opts = {k: params[k] for k in _OPTIONAL["band_random"] if k in params}
+    return t, band_random(t, amplitude_mm=params["amplitude_mm"], band_hz=params["band_hz"],
+                          seed=params["seed"], **opts)
+
+
+def _free(kind: str, params: dict[str, Any], dt: float) -> tuple[FloatArray, FloatArray]:
+    """Given samples, resampled to the control rate."""
     t_in = np.asarray(params["t_s"], dtype=float)
     c_in = np.asarray(params["command"], dtype=float)
     if t_in.ndim != 1 or t_in.shape != c_in.shape or t_in.size < 2:
@@ -249,6 +268,13 @@ def make_excitation(kind: str, *, dt_s: float = 0.01, **params: Any
         raise ValueError("free excitation: 't_s' must increase and 'command' be finite")
     t = _sample(t_in[-1] - t_in[0], dt)
     return t, np.interp(t + t_in[0], t_in, c_in)
+
+
+_BUILDERS: dict[str, Callable[[str, dict[str, Any], float], tuple[FloatArray, FloatArray]]] = {
+    "sine_decay": _sine_decay, "sine_decay_offset": _sine_decay,
+    "triangle_decay": _triangle_or_trapezoid, "trapezoid_decay": _triangle_or_trapezoid,
+    "ramp": _ramp, "sine": _sine, "mixed_sine": _mixed_sine, "band_random": _band_random,
+}
 
 
 def manifest_excitation(kind: str, params: dict[str, Any]) -> dict[str, Any]:

@@ -114,11 +114,9 @@ def params_with(overrides: dict[str, Any] | None) -> TSMParams:
     return replace(base, **overrides)
 
 
-def build_chain(*, rig: str, curve_angle_deg: float, radius_mm: float, params: TSMParams,
-                effects: EffectStrengths) -> Chain:
-    """Discretise lead-in / arc / lead-out and set the kernels' parameter vector."""
-    if rig not in RIG_NAMES:
-        raise ValueError(f"unknown rig {rig!r}; expected one of {RIG_NAMES}")
+def _arc(curve_angle_deg: float, radius_mm: float, params: TSMParams
+         ) -> tuple[float, float, float, float]:
+    """(angle in rad, radius, arc length, straight length) of a checked sheath shape."""
     phi = math.radians(float(curve_angle_deg))
     r = float(radius_mm)
     if not 0.0 <= phi <= math.pi:
@@ -130,6 +128,15 @@ def build_chain(*, rig: str, curve_angle_deg: float, radius_mm: float, params: T
     if straight <= 0.0:
         raise ValueError(f"arc of {arc_len:.1f} mm does not fit in the "
                          f"{params.sheath_length_mm} mm sheath")
+    return phi, r, arc_len, straight
+
+
+def build_chain(*, rig: str, curve_angle_deg: float, radius_mm: float, params: TSMParams,
+                effects: EffectStrengths) -> Chain:
+    """Discretise lead-in / arc / lead-out and set the kernels' parameter vector."""
+    if rig not in RIG_NAMES:
+        raise ValueError(f"unknown rig {rig!r}; expected one of {RIG_NAMES}")
+    phi, r, arc_len, straight = _arc(curve_angle_deg, radius_mm, params)
     free = params.tendon_length_mm - params.sheath_length_mm
     l_in = l_out = 0.5 * straight
     n_in, n_arc, n_out = params.n_lead_in, params.n_arc, params.n_lead_out
@@ -169,6 +176,15 @@ def build_chain(*, rig: str, curve_angle_deg: float, radius_mm: float, params: T
     elif params.initial_state != "neutral":
         raise ValueError(f"initial_state must be 'released', 'pulled' or 'neutral', got "
                          f"{params.initial_state!r}")
+    p = _kernel_parameters(rig, params, effects)
+    elong = effects.elongation_coeff() * ds
+    coef = np.ascontiguousarray(np.stack([comp_tendon, lm, elong, comp_sheath], axis=1))
+    return Chain(theta=theta, cont=cont, coef=coef, p=p, tens0=tens0,
+                 arc_nodes=slice(n_in + 1, n_in + n_arc + 1))
+
+
+def _kernel_parameters(rig: str, params: TSMParams, effects: EffectStrengths) -> np.ndarray:
+    """The physics kernels' parameter vector (indices ``ph.P_*``)."""
     p = np.zeros(ph.N_P)
     p[ph.P_MU] = params.mu
     p[ph.P_F0] = _rest_tension(rig, params)
@@ -189,10 +205,7 @@ def build_chain(*, rig: str, curve_angle_deg: float, radius_mm: float, params: T
     p[ph.P_VMAX] = params.servo_vmax_mm_s
     p[ph.P_DT] = params.physics_dt_s
     p[ph.P_TS] = params.sheath_stiffening_n
-    elong = effects.elongation_coeff() * ds
-    coef = np.ascontiguousarray(np.stack([comp_tendon, lm, elong, comp_sheath], axis=1))
-    return Chain(theta=theta, cont=cont, coef=coef, p=p, tens0=tens0,
-                 arc_nodes=slice(n_in + 1, n_in + n_arc + 1))
+    return p
 
 
 def _rest_tension(rig: str, params: TSMParams) -> float:

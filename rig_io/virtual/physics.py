@@ -243,27 +243,8 @@ def advance(x_in: float, u_out: float, mu_pull: float, mu_rel: float, tens: Floa
             _accept(tens, sv, work, wsv)
             return u_out
         # The follower slides: find its new position (spring rate makes the tension move).
-        lo = u_out
-        hi = u_out + (dx - d_full)  # stretch only grows when pulling: this overshoots
-        if kf > 0.0:
-            hi += sgn * (f_hold - ff) / kf
-        for _ in range(100):
-            mid = hi if kf == 0.0 else 0.5 * (lo + hi)
-            _backward(f0 + kf * mid + sgn * ff, sgn, mu, work, theta, cont)
-            s_new = _fill(work, wsv, coef, tref, tc, ts)
-            if kf == 0.0:
-                hi = x_in - s_new
-                break
-            if sgn * (mid + s_new - x_in) > 0.0:
-                hi = mid
-            else:
-                lo = mid
-            if abs(hi - lo) < _TOL_X:
-                break
-        u_new = hi
-        if kf != 0.0:
-            _backward(f0 + kf * u_new + sgn * ff, sgn, mu, work, theta, cont)
-            _fill(work, wsv, coef, tref, tc, ts)
+        u_new = _sliding_follower(x_in, u_out, dx - d_full, sgn, mu, f_hold, work, wsv, theta,
+                                  cont, coef, p)
         if stop_lo <= u_new <= stop_hi:
             _accept(tens, sv, work, wsv)
             slide[0] = sgn
@@ -276,7 +257,53 @@ def advance(x_in: float, u_out: float, mu_pull: float, mu_rel: float, tens: Floa
         dx = x_in - (u_out + s_old)
         if sgn * dx <= 0.0:
             return u_out
-    # Follower held by the stop: raise (lower) the input tension until the input end arrives.
+    _against_stop(dx, sgn, mu, tens, sv, work, wsv, theta, cont, coef, tref, tc, ts)
+    return u_out
+
+
+@njit(cache=True)
+def _sliding_follower(x_in: float, u_out: float, overshoot: float, sgn: float, mu: float,
+                      f_hold: float, work: FloatArray, wsv: FloatArray, theta: FloatArray,
+                      cont: FloatArray, coef: FloatArray, p: FloatArray) -> float:
+    """The follower's new position once it slides (the spring rate makes the tension move);
+    ``work``/``wsv`` hold the tensions and stretches there. ``overshoot``: the input's move
+    left after the held tendon took its stretch."""
+    tref = p[P_TREF]
+    tc = p[P_TC]
+    ts = p[P_TS]
+    f0 = p[P_F0]
+    kf = p[P_KF]
+    ff = p[P_FF]
+    lo = u_out
+    hi = u_out + overshoot  # stretch only grows when pulling: this overshoots
+    if kf > 0.0:
+        hi += sgn * (f_hold - ff) / kf
+    for _ in range(100):
+        mid = hi if kf == 0.0 else 0.5 * (lo + hi)
+        _backward(f0 + kf * mid + sgn * ff, sgn, mu, work, theta, cont)
+        s_new = _fill(work, wsv, coef, tref, tc, ts)
+        if kf == 0.0:
+            hi = x_in - s_new
+            break
+        if sgn * (mid + s_new - x_in) > 0.0:
+            hi = mid
+        else:
+            lo = mid
+        if abs(hi - lo) < _TOL_X:
+            break
+    u_new = hi
+    if kf != 0.0:
+        _backward(f0 + kf * u_new + sgn * ff, sgn, mu, work, theta, cont)
+        _fill(work, wsv, coef, tref, tc, ts)
+    return u_new
+
+
+@njit(cache=True)
+def _against_stop(dx: float, sgn: float, mu: float, tens: FloatArray, sv: FloatArray,
+                  work: FloatArray, wsv: FloatArray, theta: FloatArray, cont: FloatArray,
+                  coef: FloatArray, tref: float, tc: float, ts: float) -> None:
+    """Follower held by the stop: raise (lower) the input tension until the input end
+    arrives; the tensions and stretches are accepted in place."""
     lo_t = tens[0]
     hi_t = lo_t
     if sgn > 0.0:
@@ -291,7 +318,6 @@ def advance(x_in: float, u_out: float, mu_pull: float, mu_rel: float, tens: Floa
         hi_t = 0.0
     _solve_t0(dx, lo_t, hi_t, sgn, mu, tens, sv, work, wsv, theta, cont, coef, tref, tc, ts)
     _accept(tens, sv, work, wsv)
-    return u_out
 
 
 @njit(cache=True)

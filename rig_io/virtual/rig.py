@@ -290,6 +290,62 @@ def _run_id(curve: float, radius: float, kind: str, index: int) -> str:
     return f"phi{int(round(curve)):03d}_r{int(round(radius)):03d}_{kind}_{index:04d}"
 
 
+def _encoder_stream(core: _Core, rig: str, n: int, t_enc: FloatArray, x_true: FloatArray,
+                    y_meas: FloatArray) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """The encoder stream (100 Hz counters) and the manifest's channel blocks started with it.
+
+    Draws from the sensor stream in the order the rig's loggers always have (input counter
+    start, then output), so a seed gives the same run."""
+    cfg = core.sensor_cfg
+    rng = core.streams.sensors
+    if cfg.input_unit == "deg":
+        unit, cpu = "deg", cfg.counts_per_deg
+        x_unit = np.degrees(x_true / core.params.pulley_radius_mm)
+    else:
+        unit, cpu = "mm", cfg.counts_per_mm
+        x_unit = x_true
+    travel = int(np.ptp(x_unit) * cpu) + 1
+    in_counts = sn.encoder_counts(x_unit, sn.counter_start(cfg, rng, travel), cpu, 1)
+    out_start = sn.counter_start(cfg, rng, int(np.ptp(y_meas) * cfg.counts_per_mm) + 1)
+    t_ns = np.rint(t_enc * 1e9).astype(np.int64)
+    if rig == "bending-joint":
+        out_counts = pd.array([pd.NA] * n, dtype="Int64")
+    else:
+        out_counts = pd.array(sn.encoder_counts(y_meas, out_start, cfg.counts_per_mm,
+                                                cfg.output_sign), dtype="Int64")
+    encoder = pd.DataFrame({"t_ns": t_ns, "input_counts": in_counts,
+                            "output_counts": out_counts})
+
+    channels: dict[str, Any] = {
+        "encoder": {"unit": unit, "counts_per_unit": _number(cpu), "counter_bits": 32,
+                    "input_sign": 1, "output_sign": cfg.output_sign},
+    }
+    return encoder, channels
+
+
+def _loadcell_stream(core: _Core, fine: np.ndarray, t_fine: FloatArray,
+                     channels: dict[str, Any]) -> pd.DataFrame | None:
+    """The load-cell stream (1 kHz raw mV/V of both cells), its calibration added to
+    ``channels``; None on a rig without load cells."""
+    cfg = core.sensor_cfg
+    rng = core.streams.sensors
+    loadcell = None
+    if cfg.loadcell:
+        step = int(round(1.0 / (cfg.loadcell_rate_hz * core.params.physics_dt_s)))
+        idx = np.arange(0, fine.shape[0], max(step, 1))
+        zeros = np.round(rng.normal(0.0, cfg.loadcell_zero_sd_mv_per_v, 2), 4)
+        loadcell = pd.DataFrame({
+            "t_ns": np.rint(t_fine[idx] * 1e9).astype(np.int64),
+            "input_mv_per_v": sn.loadcell_raw(fine[idx, 2], float(zeros[0]), cfg, rng),
+            "output_mv_per_v": sn.loadcell_raw(fine[idx, 3], float(zeros[1]), cfg, rng),
+        })
+        channels["loadcell"] = {
+            side: {"newton_per_mv_per_v": cfg.newton_per_mv_per_v,
+                   "zero_mv_per_v": float(z), "range_n": cfg.loadcell_range_n}
+            for side, z in zip(("input", "output"), zeros, strict=True)}
+    return loadcell
+
+
 def simulate_run(*, rig: str = "tsm-bench", curve_angle_deg: float, radius_mm: float,
                  excitation: dict[str, Any], effects: dict[str, float] | None = None,
                  seed: int = 0, run_id: str | None = None, sensors: dict[str, Any] | None = None,
@@ -322,44 +378,8 @@ def simulate_run(*, rig: str = "tsm-bench", curve_angle_deg: float, radius_mm: f
     y_meas = core.measured_output(t_enc, t_fine, fine[:, 1])
     rng = core.streams.sensors
 
-    # --- encoder (100 Hz) --------------------------------------------------------------
-    if cfg.input_unit == "deg":
-        unit, cpu = "deg", cfg.counts_per_deg
-        x_unit = np.degrees(x_true / core.params.pulley_radius_mm)
-    else:
-        unit, cpu = "mm", cfg.counts_per_mm
-        x_unit = x_true
-    travel = int(np.ptp(x_unit) * cpu) + 1
-    in_counts = sn.encoder_counts(x_unit, sn.counter_start(cfg, rng, travel), cpu, 1)
-    out_start = sn.counter_start(cfg, rng, int(np.ptp(y_meas) * cfg.counts_per_mm) + 1)
-    t_ns = np.rint(t_enc * 1e9).astype(np.int64)
-    if rig == "bending-joint":
-        out_counts = pd.array([pd.NA] * n, dtype="Int64")
-    else:
-        out_counts = pd.array(sn.encoder_counts(y_meas, out_start, cfg.counts_per_mm,
-                                                cfg.output_sign), dtype="Int64")
-    encoder = pd.DataFrame({"t_ns": t_ns, "input_counts": in_counts,
-                            "output_counts": out_counts})
-
-    channels: dict[str, Any] = {
-        "encoder": {"unit": unit, "counts_per_unit": _number(cpu), "counter_bits": 32,
-                    "input_sign": 1, "output_sign": cfg.output_sign},
-    }
-    # --- load cells (1 kHz) ------------------------------------------------------------
-    loadcell = None
-    if cfg.loadcell:
-        step = int(round(1.0 / (cfg.loadcell_rate_hz * core.params.physics_dt_s)))
-        idx = np.arange(0, fine.shape[0], max(step, 1))
-        zeros = np.round(rng.normal(0.0, cfg.loadcell_zero_sd_mv_per_v, 2), 4)
-        loadcell = pd.DataFrame({
-            "t_ns": np.rint(t_fine[idx] * 1e9).astype(np.int64),
-            "input_mv_per_v": sn.loadcell_raw(fine[idx, 2], float(zeros[0]), cfg, rng),
-            "output_mv_per_v": sn.loadcell_raw(fine[idx, 3], float(zeros[1]), cfg, rng),
-        })
-        channels["loadcell"] = {
-            side: {"newton_per_mv_per_v": cfg.newton_per_mv_per_v,
-                   "zero_mv_per_v": float(z), "range_n": cfg.loadcell_range_n}
-            for side, z in zip(("input", "output"), zeros, strict=True)}
+    encoder, channels = _encoder_stream(core, rig, n, t_enc, x_true, y_meas)
+    loadcell = _loadcell_stream(core, fine, t_fine, channels)
     # --- camera / tracker ----------------------------------------------------------------
     t_end = float(t_enc[-1])
     bending = rig == "bending-joint"
@@ -395,7 +415,8 @@ def simulate_run(*, rig: str = "tsm-bench", curve_angle_deg: float, radius_mm: f
         channels["tracker"] = {"quantity": quantity, "source": "tracker",
                                "nominal_latency_ms": _number(cfg.tracker_latency_ms),
                                "rate_hz": _number(cfg.tracker_rate_hz)}
-    events = pd.DataFrame({"t_ns": np.array([0, int(t_ns[-1])], dtype=np.int64),
+    events = pd.DataFrame({"t_ns": np.array([0, int(encoder["t_ns"].iloc[-1])],
+                                            dtype=np.int64),
                            "event": ["start", "stop"], "detail": ["", ""]})
 
     rid = run_id if run_id is not None else _run_id(curve_angle_deg, radius_mm, kind, seed)
