@@ -206,6 +206,68 @@ def _canon_sens(
 # numba kernels: inverses
 # ---------------------------------------------------------------------------------------------
 @numba.njit(cache=True)
+def _bracket(h: float, up: float, d: float, g0: float, step: float, target: float,
+             a_: float, b_: float, c_: float, n: float, alpha: float, beta: float,
+             offset: float, max_sub: int, scale: float, lip_u: float
+             ) -> tuple[bool, float, float, float, float, float]:
+    """Growing steps ``x`` along ``d`` until the residual changes sign: (found, lo, g(lo),
+    hi, g(hi), the step of smallest residual seen)."""
+    lo = 0.0
+    glo = g0
+    best_x = 0.0
+    best_g = abs(g0)
+    hi = 0.0
+    ghi = g0
+    x = min(step * 0.5, scale)
+    for _ in range(80):
+        hx = _advance(h, d * x, a_, b_, c_, n, max_sub, lip_u)
+        if math.isnan(hx):
+            break
+        gx = alpha * (up + d * x) + beta * hx + offset - target
+        if abs(gx) < best_g:
+            best_g = abs(gx)
+            best_x = x
+        if gx * g0 <= 0.0:
+            return True, lo, glo, x, gx, best_x
+        lo = x
+        glo = gx
+        x = x * 1.6 + 1e-12 * scale
+        if x > 1e3 * scale:
+            break
+    return False, lo, glo, hi, ghi, best_x
+
+
+@numba.njit(cache=True)
+def _false_position(h: float, up: float, d: float, lo: float, glo: float, hi: float,
+                    ghi: float, target: float, a_: float, b_: float, c_: float, n: float,
+                    alpha: float, beta: float, offset: float, max_sub: int, scale: float,
+                    lip_u: float) -> float:
+    """Illinois false position inside a bracket ``[lo, hi]``: the end of smaller residual."""
+    side = 0
+    for _ in range(100):
+        xm = (lo * ghi - hi * glo) / (ghi - glo) if ghi != glo else 0.5 * (lo + hi)
+        if not (lo < xm < hi):
+            xm = 0.5 * (lo + hi)
+        hm = _advance(h, d * xm, a_, b_, c_, n, max_sub, lip_u)
+        gm = alpha * (up + d * xm) + beta * hm + offset - target
+        if gm * glo > 0.0:
+            lo = xm
+            glo = gm
+            if side == -1:
+                ghi *= 0.5
+            side = -1
+        else:
+            hi = xm
+            ghi = gm
+            if side == 1:
+                glo *= 0.5
+            side = 1
+        if hi - lo < 1e-13 * scale or gm == 0.0:
+            break
+    return hi if abs(ghi) < abs(glo) else lo
+
+
+@numba.njit(cache=True)
 def _invert_exact(
     yd: FloatArray,
     a_: float, b_: float, c_: float, n: float, alpha: float, beta: float, offset: float,
@@ -231,55 +293,11 @@ def _invert_exact(
             continue
         d = -dirsign if g0 > 0.0 else dirsign  # move u so that y moves toward the target
         step = max(abs(g0 / alpha) if alpha != 0.0 else scale, 1e-9 * scale)
-        lo = 0.0
-        glo = g0
-        best_x = 0.0
-        best_g = abs(g0)
-        found = False
-        hi = 0.0
-        ghi = g0
-        x = min(step * 0.5, scale)
-        for _ in range(80):
-            hx = _advance(h, d * x, a_, b_, c_, n, max_sub, lip_u)
-            if math.isnan(hx):
-                break
-            gx = alpha * (up + d * x) + beta * hx + offset - target
-            if abs(gx) < best_g:
-                best_g = abs(gx)
-                best_x = x
-            if gx * g0 <= 0.0:
-                hi = x
-                ghi = gx
-                found = True
-                break
-            lo = x
-            glo = gx
-            x = x * 1.6 + 1e-12 * scale
-            if x > 1e3 * scale:
-                break
+        found, lo, glo, hi, ghi, best_x = _bracket(
+            h, up, d, g0, step, target, a_, b_, c_, n, alpha, beta, offset, max_sub, scale, lip_u)
         if found:
-            side = 0
-            for _ in range(100):
-                xm = (lo * ghi - hi * glo) / (ghi - glo) if ghi != glo else 0.5 * (lo + hi)
-                if not (lo < xm < hi):
-                    xm = 0.5 * (lo + hi)
-                hm = _advance(h, d * xm, a_, b_, c_, n, max_sub, lip_u)
-                gm = alpha * (up + d * xm) + beta * hm + offset - target
-                if gm * glo > 0.0:
-                    lo = xm
-                    glo = gm
-                    if side == -1:
-                        ghi *= 0.5
-                    side = -1
-                else:
-                    hi = xm
-                    ghi = gm
-                    if side == 1:
-                        glo *= 0.5
-                    side = 1
-                if hi - lo < 1e-13 * scale or gm == 0.0:
-                    break
-            x = hi if abs(ghi) < abs(glo) else lo
+            x = _false_position(h, up, d, lo, glo, hi, ghi, target, a_, b_, c_, n, alpha, beta,
+                                offset, max_sub, scale, lip_u)
         else:
             x = best_x
         unew = up + d * x

@@ -100,6 +100,29 @@ def gamma_invert_exact(
     When no root exists (``sum q <= 0`` and ``y_d`` out of reach) the input with the smallest
     output error among the breakpoints is returned.
     """
+    bps = _sorted_breakpoints(w, p)
+    sq = 0.0
+    for i in range(p.size):
+        sq += q[i]
+    f0 = gamma_at(v_prev, w, p, q, offset) - y_d
+    if f0 == 0.0:
+        return v_prev
+    right = _root_right(y_d, w, p, q, offset, v_prev, f0, bps, sq)
+    left = _root_left(y_d, w, p, q, offset, v_prev, f0, bps, sq)
+    if right < np.inf or left > -np.inf:
+        return right if (right - v_prev) <= (v_prev - left) else left
+    # unreachable: least-error breakpoint
+    best_v, best_e = v_prev, abs(f0)
+    for j in range(bps.size):
+        e = abs(gamma_at(bps[j], w, p, q, offset) - y_d)
+        if e < best_e:
+            best_v, best_e = bps[j], e
+    return best_v
+
+
+@njit(cache=True, nogil=True)
+def _sorted_breakpoints(w: FloatArray, p: FloatArray) -> FloatArray:
+    """The ``2n`` breakpoints ``w_i`` and ``w_i + p_i`` in ascending order."""
     n = p.size
     bps = np.empty(2 * n)
     for i in range(n):
@@ -113,18 +136,16 @@ def gamma_invert_exact(
             bps[j + 1] = bps[j]
             j -= 1
         bps[j + 1] = x
-    sq = 0.0
-    for i in range(n):
-        sq += q[i]
-    f0 = gamma_at(v_prev, w, p, q, offset) - y_d
-    if f0 == 0.0:
-        return v_prev
-    inf = np.inf
-    # -- right walk
-    right = inf
+    return bps
+
+
+@njit(cache=True, nogil=True)
+def _root_right(y_d: float, w: FloatArray, p: FloatArray, q: FloatArray, offset: float,
+                v_prev: float, f0: float, bps: FloatArray, sq: float) -> float:
+    """The nearest root above ``v_prev`` (``inf`` when there is none)."""
+    right = np.inf
     a, fa = v_prev, f0
-    found = False
-    for j in range(2 * n):
+    for j in range(bps.size):
         b = bps[j]
         if b <= v_prev:
             continue
@@ -132,42 +153,35 @@ def gamma_invert_exact(
         # signs, not the product: the product of two tiny values underflows to 0
         if (fa <= 0.0 <= fb) or (fb <= 0.0 <= fa):
             den = fa - fb
-            right = a if den == 0.0 else a + (b - a) * fa / den
-            found = True
-            break
+            return a if den == 0.0 else a + (b - a) * fa / den
         a, fa = b, fb
-    if not found and sq != 0.0:
+    if sq != 0.0:
         t = -fa / sq  # beyond the last breakpoint the slope is sum(q)
         if t >= 0.0:
             right = a + t
-    # -- left walk
-    left = -inf
+    return right
+
+
+@njit(cache=True, nogil=True)
+def _root_left(y_d: float, w: FloatArray, p: FloatArray, q: FloatArray, offset: float,
+               v_prev: float, f0: float, bps: FloatArray, sq: float) -> float:
+    """The nearest root below ``v_prev`` (``-inf`` when there is none)."""
+    left = -np.inf
     a, fa = v_prev, f0
-    found = False
-    for j in range(2 * n - 1, -1, -1):
+    for j in range(bps.size - 1, -1, -1):
         b = bps[j]
         if b >= v_prev:
             continue
         fb = gamma_at(b, w, p, q, offset) - y_d
         if (fa <= 0.0 <= fb) or (fb <= 0.0 <= fa):
             den = fa - fb
-            left = a if den == 0.0 else a + (b - a) * fa / den
-            found = True
-            break
+            return a if den == 0.0 else a + (b - a) * fa / den
         a, fa = b, fb
-    if not found and sq != 0.0:
+    if sq != 0.0:
         t = fa / sq  # going left the output falls at rate sum(q)
         if t >= 0.0:
             left = a - t
-    if right < inf or left > -inf:
-        return right if (right - v_prev) <= (v_prev - left) else left
-    # unreachable: least-error breakpoint
-    best_v, best_e = v_prev, abs(f0)
-    for j in range(2 * n):
-        e = abs(gamma_at(bps[j], w, p, q, offset) - y_d)
-        if e < best_e:
-            best_v, best_e = bps[j], e
-    return best_v
+    return left
 
 
 @njit(cache=True, nogil=True)

@@ -32,6 +32,7 @@ the others down), the usual rest state of a mechanism that settled at ``u0``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -309,23 +310,7 @@ class PreisachModel(StatefulModel):
             res_: FloatArray = a @ c - qt
             return coef, res_
 
-        # Start: coarse grid over (H0, sigma[, kappa]).
-        best: tuple[float, FloatArray] | None = None
-        kappas = (1.0, 1.0 / 16.0, 1.0 / 256.0, 0.0) if spread_free else (1.0,)
-        for h0 in half * np.array([0.03, 0.08, 0.15, 0.3, 0.5]):
-            for sigma in (0.3, 0.6, 1.2):
-                for kappa in kappas:
-                    theta = np.array([1.0, h0, sigma, centre0, kappa])
-                    coef, res_ = linear_part(theta)
-                    if coef[0] <= 0:
-                        continue
-                    sse = float(res_ @ res_)
-                    if best is None or sse < best[0]:
-                        best = (sse, theta)
-        if best is None:
-            raise HysteresisError(
-                "no positive density fits the data (is the output decreasing in the input?)"
-            )
+        best = _grid_start(linear_part, half, centre0, spread_free)
         # Nonlinear least squares over the shape only (H0, sigma, centre[, kappa]); the
         # linear part is projected out at every evaluation (far fewer iterations than
         # optimising N and the offset jointly with the shape).
@@ -421,3 +406,26 @@ class PreisachModel(StatefulModel):
             self.offset_, self.reversible_gain_, st.r, st.u, lo, hi, float(self.inverse_xtol),
         )
         return (u, PreisachState(r, float(v))) if return_state else u
+
+
+def _grid_start(linear_part: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
+                half: float, centre0: float, spread_free: bool) -> tuple[float, FloatArray]:
+    """The parametric fit's start: the best (sse, shape) of a coarse grid over
+    (H0, sigma[, kappa]) with a positive density."""
+    best: tuple[float, FloatArray] | None = None
+    kappas = (1.0, 1.0 / 16.0, 1.0 / 256.0, 0.0) if spread_free else (1.0,)
+    for h0 in half * np.array([0.03, 0.08, 0.15, 0.3, 0.5]):
+        for sigma in (0.3, 0.6, 1.2):
+            for kappa in kappas:
+                theta = np.array([1.0, h0, sigma, centre0, kappa])
+                coef, res_ = linear_part(theta)
+                if coef[0] <= 0:
+                    continue
+                sse = float(res_ @ res_)
+                if best is None or sse < best[0]:
+                    best = (sse, theta)
+    if best is None:
+        raise HysteresisError(
+            "no positive density fits the data (is the output decreasing in the input?)"
+        )
+    return best

@@ -338,6 +338,30 @@ def leave_one_out_models(
     if est.method != "poly" or n < 3 or len(models) != n:
         return [None] * n
     feats = shape_features(shapes[:, 0], shapes[:, 1])
+    ok = _folds_keeping_the_design(est, shapes, feats)
+    x = est._scaled(feats)
+    a = est._basis(x)
+    gram_inv = _ridge_inverse(a, float(est.ridge), n)
+    if gram_inv is None:
+        return [None] * n
+    leverage = np.einsum("ij,jk,ik->i", a, gram_inv, a)
+    ok &= (1.0 - leverage) > 1e-8
+    # nearest other configuration in the scaled plane (the fold's scaling is the full one)
+    dist = np.sum((x[:, None, :] - x[None, :, :]) ** 2, axis=2)
+    np.fill_diagonal(dist, np.inf)
+    nearest = np.argmin(dist, axis=1)
+    loo = _press_values(models, a, gram_inv, leverage, ok)
+    dicts = [m.to_dict() for m in models]
+    return [(_fold_model(dicts[int(nearest[i])], loo, i), int(nearest[i])) if ok[i] else None
+            for i in range(n)]
+
+
+def _folds_keeping_the_design(est: ShapeAwareModel, shapes: FloatArray,
+                              feats: FloatArray) -> np.ndarray:
+    """Which folds are the full regression with one row fewer: the feature scaling and the
+    degrees stay (no lone shape at an extreme, none alone at its angle or radius). Sets the
+    full fit's scaling on ``est``."""
+    n = shapes.shape[0]
     lo, hi = feats.min(axis=0), feats.max(axis=0)
     ok = np.ones(n, dtype=bool)
     for col in range(feats.shape[1]):  # the fold's scaling must equal the full one
@@ -352,40 +376,36 @@ def leave_one_out_models(
         if min(asked, values.size - 2) != min(asked, values.size - 1):  # a fold lowers it
             lonely = values[counts == 1]
             ok &= ~np.isin(shapes[:, col], lonely)
-    x = est._scaled(feats)
-    a = est._basis(x)
+    return ok
+
+
+def _ridge_inverse(a: FloatArray, ridge: float, n: int) -> FloatArray | None:
+    """``(A'A + P'P)^-1`` of the ridge regression (intercept not penalised), or None where
+    every fold is underdetermined or the Gram matrix is rank-deficient."""
     p = a.shape[1]
-    if p > n - 1 and float(est.ridge) == 0.0:  # every fold is underdetermined: it raises
-        return [None] * n
-    pen = np.full(p, float(est.ridge))
+    if p > n - 1 and ridge == 0.0:  # every fold is underdetermined: it raises
+        return None
+    pen = np.full(p, ridge)
     pen[0] = 0.0
     gram = a.T @ a + np.diag(pen)
     if np.linalg.cond(gram) > 1e12:  # rank-deficient: least squares picks the least norm
-        return [None] * n
-    gram_inv = np.linalg.inv(gram)
-    leverage = np.einsum("ij,jk,ik->i", a, gram_inv, a)
-    ok &= (1.0 - leverage) > 1e-8
-    # nearest other configuration in the scaled plane (the fold's scaling is the full one)
-    dist = np.sum((x[:, None, :] - x[None, :, :]) ** 2, axis=2)
-    np.fill_diagonal(dist, np.inf)
-    nearest = np.argmin(dist, axis=1)
+        return None
+    return np.asarray(np.linalg.inv(gram))
 
-    dicts = [m.to_dict() for m in models]
+
+def _press_values(models: Sequence[HysteresisModel], a: FloatArray, gram_inv: FloatArray,
+                  leverage: FloatArray, ok: np.ndarray
+                  ) -> dict[str, tuple[FloatArray, FloatArray]]:
+    """Fitted attribute -> (each fold's PRESS prediction, where a fold keeps the nearest
+    model's value). A fold whose own value is the odd one out is marked not ``ok``."""
+    n = len(models)
     names = list(dict.fromkeys(k for m in models for k in m.fitted_attributes()))
-    loo: dict[str, tuple[FloatArray, FloatArray]] = {}  # name -> (loo values, fold keeps)
+    loo: dict[str, tuple[FloatArray, FloatArray]] = {}
     for name in names:
         column = [getattr(m, name, None) for m in models]
         stacked = _float_stack(column)
         if stacked is None:
-            # a fold regresses it only when the one odd value (not a finite float array, or
-            # of another shape) is its own: leave that fold to the caller
-            bad = [j for j, v in enumerate(column) if _float_stack([v]) is None]
-            if not bad:
-                dims = [np.shape(np.asarray(v)) for v in column]
-                seen = Counter(dims)
-                bad = [j for j, d in enumerate(dims) if seen[d] == 1] if len(seen) == 2 else []
-            if len(bad) == 1:
-                ok[bad[0]] = False
+            _mark_odd_fold(column, ok)
             continue
         flat = stacked.reshape(n, -1)
         same0 = np.all(flat == flat[0], axis=1)
@@ -398,20 +418,32 @@ def leave_one_out_models(
         with np.errstate(divide="ignore", invalid="ignore"):
             values = flat - resid / (1.0 - leverage)[:, None]
         loo[name] = (values, keeps)
-    out: list[tuple[HysteresisModel, int] | None] = []
-    for i in range(n):
-        if not ok[i]:
-            out.append(None)
+    return loo
+
+
+def _mark_odd_fold(column: Sequence[Any], ok: np.ndarray) -> None:
+    """A fold regresses a parameter only when the one odd value (not a finite float array,
+    or of another shape) is its own: leave that fold to the caller."""
+    bad = [j for j, v in enumerate(column) if _float_stack([v]) is None]
+    if not bad:
+        dims = [np.shape(np.asarray(v)) for v in column]
+        seen = Counter(dims)
+        bad = [j for j, d in enumerate(dims) if seen[d] == 1] if len(seen) == 2 else []
+    if len(bad) == 1:
+        ok[bad[0]] = False
+
+
+def _fold_model(nearest: dict[str, Any], loo: dict[str, tuple[FloatArray, FloatArray]],
+                i: int) -> HysteresisModel:
+    """Fold ``i``'s model: the nearest configuration's, its parameters set to their PRESS
+    predictions (those the fold regresses)."""
+    model = HysteresisModel.from_dict(nearest)
+    for name, value in model.fitted_attributes().items():
+        if name not in loo or loo[name][1][i]:
             continue
-        j = int(nearest[i])
-        model = HysteresisModel.from_dict(dicts[j])
-        for name, value in model.fitted_attributes().items():
-            if name not in loo or loo[name][1][i]:
-                continue
-            new = loo[name][0][i]
-            if isinstance(value, np.ndarray):
-                setattr(model, name, np.ascontiguousarray(new.reshape(value.shape)))
-            else:
-                setattr(model, name, float(new[0]))
-        out.append((model, j))
-    return out
+        new = loo[name][0][i]
+        if isinstance(value, np.ndarray):
+            setattr(model, name, np.ascontiguousarray(new.reshape(value.shape)))
+        else:
+            setattr(model, name, float(new[0]))
+    return model
