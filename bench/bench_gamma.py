@@ -42,6 +42,50 @@ def mixed_sine(n: int, rate_hz: float = 100.0) -> np.ndarray:
     )
 
 
+def _gamma_inverse_row(p: np.ndarray, weights: np.ndarray) -> dict[str, float]:
+    """Per-step inverse timings and errors of one shape's Gamma model: ours (exact) against
+    the thesis' bounded scalar search."""
+    gm = GammaModel.from_params(p, weights)
+    yd = mixed_sine(2000)
+    gm.invert(yd[:5])
+    gm.invert_step(float(yd[0]))
+    n_ref = 400
+    t_exact_seq = _best_of(lambda: gm.invert(yd), 5) / yd.size
+
+    def stepwise(gm: GammaModel = gm, yd: np.ndarray = yd, method: str = "exact",
+                 n: int = n_ref) -> np.ndarray:
+        st = gm.initial_state()
+        res = np.empty(n)
+        for k in range(n):
+            res[k], st = gm.invert_step(float(yd[k]), st, method=method)
+        return res
+
+    t_exact_step = _best_of(stepwise, 3) / n_ref
+    t_bounded = _best_of(lambda: stepwise(method="bounded"), 2) / n_ref
+    u_exact = gm.invert(yd[:n_ref])
+    u_bounded = stepwise(method="bounded")
+    err_exact = float(np.max(np.abs(gm.predict(u_exact) - yd[:n_ref])))
+    err_bounded = float(np.max(np.abs(gm.predict(u_bounded) - yd[:n_ref])))
+    # monotone variant (all weights > 0): where the bounded search is reliable
+    pos = GammaModel.from_params(p, np.full(11, 1 / 11))
+    ub = np.empty(n_ref)
+    st = pos.initial_state()
+    for k in range(n_ref):
+        ub[k], st = pos.invert_step(float(yd[k]), st, method="bounded")
+    return {
+        "exact_sequence_us_per_step": t_exact_seq * 1e6,
+        "exact_invert_step_us_per_step": t_exact_step * 1e6,
+        "bounded_search_us_per_step": t_bounded * 1e6,
+        "speedup_sequence_vs_bounded": t_bounded / t_exact_seq,
+        "speedup_invert_step_vs_bounded": t_bounded / t_exact_step,
+        "max_abs_error_exact_mm": err_exact,
+        "max_abs_error_bounded_mm": err_bounded,
+        "max_abs_error_bounded_positive_weights_mm": float(
+            np.max(np.abs(pos.predict(ub) - yd[:n_ref]))
+        ),
+    }
+
+
 def run() -> dict[str, Any]:
     u = sine_decay()  # 8000 samples, 80 s at 100 Hz
     p = np.linspace(0.0, 2.0, 11)
@@ -88,47 +132,8 @@ def run() -> dict[str, Any]:
     out["preisach_hysterons"] = int(models["preisach"].alpha_.size)
 
     # -- Gamma inverse per step: ours vs the thesis' bounded scalar search ----------------
-    inv: dict[str, Any] = {}
-    for shape in ((90, 30), (60, 60)):
-        gm = GammaModel.from_params(p, rows[shape])
-        yd = mixed_sine(2000)
-        gm.invert(yd[:5])
-        gm.invert_step(float(yd[0]))
-        n_ref = 400
-        t_exact_seq = _best_of(lambda: gm.invert(yd), 5) / yd.size  # noqa: B023
-
-        def stepwise(gm: GammaModel = gm, yd: np.ndarray = yd, method: str = "exact",
-                     n: int = n_ref) -> np.ndarray:
-            st = gm.initial_state()
-            res = np.empty(n)
-            for k in range(n):
-                res[k], st = gm.invert_step(float(yd[k]), st, method=method)
-            return res
-
-        t_exact_step = _best_of(stepwise, 3) / n_ref
-        t_bounded = _best_of(lambda: stepwise(method="bounded"), 2) / n_ref
-        u_exact = gm.invert(yd[:n_ref])
-        u_bounded = stepwise(method="bounded")
-        err_exact = float(np.max(np.abs(gm.predict(u_exact) - yd[:n_ref])))
-        err_bounded = float(np.max(np.abs(gm.predict(u_bounded) - yd[:n_ref])))
-        # monotone variant (all weights > 0): where the bounded search is reliable
-        pos = GammaModel.from_params(p, np.full(11, 1 / 11))
-        ub = np.empty(n_ref)
-        st = pos.initial_state()
-        for k in range(n_ref):
-            ub[k], st = pos.invert_step(float(yd[k]), st, method="bounded")
-        inv[f"phi{shape[0]:03d}_r{shape[1]:03d}"] = {
-            "exact_sequence_us_per_step": t_exact_seq * 1e6,
-            "exact_invert_step_us_per_step": t_exact_step * 1e6,
-            "bounded_search_us_per_step": t_bounded * 1e6,
-            "speedup_sequence_vs_bounded": t_bounded / t_exact_seq,
-            "speedup_invert_step_vs_bounded": t_bounded / t_exact_step,
-            "max_abs_error_exact_mm": err_exact,
-            "max_abs_error_bounded_mm": err_bounded,
-            "max_abs_error_bounded_positive_weights_mm": float(
-                np.max(np.abs(pos.predict(ub) - yd[:n_ref]))
-            ),
-        }
+    inv = {f"phi{shape[0]:03d}_r{shape[1]:03d}": _gamma_inverse_row(p, rows[shape])
+           for shape in ((90, 30), (60, 60))}
     out["gamma_inverse"] = inv
     pm = models["preisach"]
     s0 = pm.initial_state(0.0)
