@@ -29,9 +29,9 @@ from typing import Any
 
 #: What each make target writes, relative to a project root.
 STAGE_OUTPUTS: dict[str, tuple[str, ...]] = {
-    "pipeline": ("data/processed", "data/interim", "data/reports"),
-    "compensate": ("data/reports/compensation",),
-    "discrepancy": ("data/reports/discrepancy", "data/interim/discrepancy"),
+    "pipeline": ("data/raw", "data/processed", "data/interim", "data/reports"),
+    "compensate": ("data/reports/compensation", "data/reports/compensation.md"),
+    "discrepancy": ("data/reports/discrepancy.json", "data/reports/discrepancy_plots"),
 }
 #: Not outputs: the tracking store, Hydra's folders, logs, caches of compiled code.
 IGNORED_PARTS = {"mlruns", "mlflow", ".hydra", "outputs", "multirun", "__pycache__",
@@ -54,7 +54,8 @@ def output_files(root: Path, stages: Iterable[str]) -> dict[str, Path]:
             base = root / rel
             if not base.exists():
                 continue
-            for path in sorted(p for p in base.rglob("*") if p.is_file()):
+            files = [base] if base.is_file() else sorted(p for p in base.rglob("*") if p.is_file())
+            for path in files:
                 parts = set(path.relative_to(root).parts)
                 if parts & IGNORED_PARTS or path.suffix in IGNORED_SUFFIXES:
                     continue
