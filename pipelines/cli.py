@@ -136,23 +136,114 @@ def check_overrides(stage: str, argv: Sequence[str]) -> None:
     except OverrideParseException as err:
         raise CommandLineError(f"{stage}: {str(err).splitlines()[0]}") from None
     groups = config_groups()
+    chosen: dict[str, str] = {}  # group -> the option the command line picks
+    for ov in parsed:
+        picked = ov.value()
+        if ov.key_or_group in groups and isinstance(picked, str):
+            chosen[ov.key_or_group] = picked
     for ov in parsed:
         key = ov.key_or_group
-        if ov.is_delete() or key.split("/")[0].split(".")[0] in groups:
+        head = key.split("/")[0].split(".")[0]
+        if ov.is_delete() or head in groups:
+            if not ov.is_delete() and head in CHECKED_GROUPS and "." in key:
+                _check_group_key(stage, key, _values(ov), chosen.get(head))
             continue
-        node = _typed_node(stage)
-        if not _exists(node, key):
-            raise _unknown(stage, node, key, ov.is_add())
-        values = _values(ov)
-        for value in values or []:
-            node = _typed_node(stage)  # fresh: one choice of a sweep must not hide another
-            try:
-                OmegaConf.update(node, key, value, merge=True)
-            except OmegaConfBaseException:
-                raise CommandLineError(
-                    f"{stage}: {key}={value!r} is not {_expected_type(stage, key)}") from None
-            if key in NUMERIC_SELECTORS:
-                _check_numbers(stage, key, value)
+        _check_setting(stage, ov)
+
+
+def _check_setting(stage: str, ov: Any) -> None:
+    """One override of the stage's own settings: a known key, a value of its type."""
+    key = ov.key_or_group
+    node = _typed_node(stage)
+    if not _exists(node, key):
+        raise _unknown(stage, node, key, ov.is_add())
+    values = _values(ov)
+    for value in values or []:
+        node = _typed_node(stage)  # fresh: one choice of a sweep must not hide another
+        try:
+            OmegaConf.update(node, key, value, merge=True)
+        except OmegaConfBaseException:
+            raise CommandLineError(
+                f"{stage}: {key}={value!r} is not {_expected_type(stage, key)}") from None
+        if key in NUMERIC_SELECTORS:
+            _check_numbers(stage, key, value)
+        if key.startswith("overrides.") and isinstance(value, list):
+            _check_stage_overrides(stage, key, value)
+
+
+def _check_stage_overrides(stage: str, key: str, lines: list[Any]) -> None:
+    """run_all's ``overrides.<stage>=[...]``: each line is checked as that stage's own
+    command line would be, before anything runs."""
+    inner = key.split(".", 1)[1]
+    if inner not in schemas.STAGE_SCHEMAS:
+        return
+    try:
+        check_overrides(inner, [str(line) for line in lines])
+    except CommandLineError as err:
+        raise CommandLineError(f"{stage}: in {key}: {err}") from None
+
+
+# -- config groups ---------------------------------------------------------------------------
+
+#: Groups whose options are closed sets of keys: a key none of the options has is a typo.
+#: (``importer`` mappings are the user's own; ``experiment`` and ``hydra`` are not nodes.)
+CHECKED_GROUPS = {"campaign", "effects", "family", "paths", "rig", "tracking"}
+
+
+def _group_options(group: str, chosen: str | None) -> list[Any]:
+    """The raw (unresolved) option files of ``group``: the chosen one, else all of them."""
+    files = sorted((CONF_DIR / group).glob("*.yaml"))
+    if chosen is not None and (CONF_DIR / group / f"{chosen}.yaml").exists():
+        files = [CONF_DIR / group / f"{chosen}.yaml"]
+    return [OmegaConf.to_container(OmegaConf.load(f), resolve=False) for f in files]
+
+
+def _lookup(option: Any, parts: Sequence[str]) -> tuple[bool, Any]:
+    """(found, value) of a dotted key in one option; a free mapping (``params: {}``) or a
+    list on the way takes any key below it."""
+    node = option
+    for part in parts:
+        if isinstance(node, list) or (isinstance(node, dict) and not node):
+            return True, None
+        if not isinstance(node, dict) or part not in node:
+            return False, None
+        node = node[part]
+    return True, node
+
+
+def _check_group_key(stage: str, key: str, values: list[Any] | None,
+                     chosen: str | None) -> None:
+    """``group.key=value``: the key must exist in the group's option (the one chosen on the
+    command line, else any), and a value where every option holds a number (or true/false)
+    must be one too."""
+    group, *parts = key.split(".")
+    options = _group_options(group, chosen)
+    found = [value for ok, value in (_lookup(o, parts) for o in options) if ok]
+    if not found:
+        known = sorted({k for o in options for k in _keys_at(o, parts[:-1])})
+        where = ".".join([group, *parts[:-1]])
+        raise CommandLineError(
+            f"{stage}: unknown setting {key!r} under {where!r}{_near(parts[-1], known)}; "
+            f"the options of conf/{group}/ have {', '.join(known) or 'no such keys'}")
+    for value in values or []:
+        _check_group_value(stage, key, value, found)
+
+
+def _keys_at(option: Any, parts: Sequence[str]) -> list[str]:
+    ok, node = _lookup(option, parts) if parts else (True, option)
+    return [str(k) for k in node if k != "defaults"] if ok and isinstance(node, dict) else []
+
+
+def _check_group_value(stage: str, key: str, value: Any, defaults: list[Any]) -> None:
+    scalars = [d for d in defaults if d is not None and not isinstance(d, dict | list | str)]
+    if value is None or not scalars or len(scalars) != len(defaults):
+        return
+    if all(isinstance(d, bool) for d in scalars):
+        if not isinstance(value, bool):
+            raise CommandLineError(f"{stage}: {key}={value!r} is not true or false")
+    elif all(isinstance(d, int | float) and not isinstance(d, bool) for d in scalars):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise CommandLineError(f"{stage}: {key}={value!r} is not a number")
 
 
 def _exists(node: DictConfig, key: str) -> bool:
