@@ -10,7 +10,10 @@ only after they are masked:
 
 - wall-clock fields: a JSON/YAML key or table column that measures time spent or tells when
   (``seconds``, ``elapsed_s``, ``started`` ...) and the "in 12.3 s" of a report's prose;
-- the project root itself, where a file names it (a report's link to its own folder).
+- the project root itself, where a file names it (a report's link to its own folder);
+- content keys and hashes (16 to 64 hex digits, ``*.sha256`` files): a cache key holds the
+  code's hash and the dataset's (whose run index names the root), so it changes with any
+  commit and any clone; what the keys stand for is compared itself.
 
 A parquet file is compared as its table (pyarrow writes its own version into the footer);
 an image is compared by its pixels where the bytes differ (PNG metadata). The MLflow store,
@@ -36,13 +39,17 @@ STAGE_OUTPUTS: dict[str, tuple[str, ...]] = {
 #: Not outputs: the tracking store, Hydra's folders, logs, caches of compiled code.
 IGNORED_PARTS = {"mlruns", "mlflow", ".hydra", "outputs", "multirun", "__pycache__",
                  "numba-cache", ".locks"}
-IGNORED_SUFFIXES = {".log", ".db", ".sqlite", ".lock", ".tmp"}
+IGNORED_SUFFIXES = {".log", ".db", ".sqlite", ".lock", ".tmp", ".sha256"}
+#: Files that are wall-clock measurements as a whole: only their keys are compared.
+TIMING_FILES = {"pipeline_timing.json"}
 #: A key or column that measures time spent, or tells when: masked before comparing.
 WALL_CLOCK = re.compile(
     r"(^|_)(seconds|second|secs|elapsed|elapsed_s|wall|wall_s|duration|duration_s|time_s|"
     r"cpu_s|started|start_time|end_time|finished|timestamp|created|written_at|at|"
     r"runtime|runtime_s|took|took_s|per_run_s|fit_s|total_s|s_per_run)$")
 PROSE_TIME = re.compile(r"\b\d+(\.\d+)?\s?(s|ms|min)\b")
+#: a hex key or digest (not the digits of a number: one letter at least, no decimal point)
+HEX_KEY = re.compile(r"(?<![.\d])\b(?=[0-9]*[a-f])[0-9a-f]{16,64}\b")
 ISO_TIME = re.compile(r"\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(\.\d+)?(Z|[+-]\d{2}:?\d{2})?")
 
 
@@ -64,6 +71,8 @@ def output_files(root: Path, stages: Iterable[str]) -> dict[str, Path]:
 
 
 def _mask_json(value: Any) -> Any:
+    if isinstance(value, float) and value != value:
+        return "<nan>"  # NaN != NaN: two equal files would differ
     if isinstance(value, dict):
         return {k: ("<time>" if WALL_CLOCK.search(str(k).lower()) else _mask_json(v))
                 for k, v in value.items()}
@@ -74,9 +83,17 @@ def _mask_json(value: Any) -> Any:
     return value
 
 
+def _keys_of(text: str) -> Any:
+    def keys(value: Any) -> Any:
+        return {k: keys(v) for k, v in value.items()} if isinstance(value, dict) else None
+
+    return keys(json.loads(text))
+
+
 def _masked_text(text: str, root: Path) -> str:
     text = text.replace(str(root.resolve()), "<root>").replace(str(root), "<root>")
     text = ISO_TIME.sub("<when>", text)
+    text = HEX_KEY.sub("<key>", text)
     return PROSE_TIME.sub("<time>", text)
 
 
@@ -115,6 +132,8 @@ def same_content(a: Path, b: Path, root_a: Path, root_b: Path) -> bool:
         text_a, text_b = raw_a.decode("utf-8"), raw_b.decode("utf-8")
     except UnicodeDecodeError:
         return False
+    if a.name in TIMING_FILES:
+        return _keys_of(text_a) == _keys_of(text_b)
     if suffix == ".json":
         try:
             return bool(_mask_json(json.loads(_masked_text(text_a, root_a)))
