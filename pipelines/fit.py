@@ -16,10 +16,10 @@ import json
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import hydra
 import pandas as pd
 
 from pipelines import cache, schemas, stages
@@ -33,10 +33,9 @@ from pipelines.common import (
     hydra_sweep_dir,
     identification_plan,
     read_processed,
-    run_stage,
     stage_columns,
-    to_container,
 )
+from pipelines.skeleton import Stage, TrackContext
 from pipelines.stages import FamilySpec, FitTask, PipelineError
 from rig_io.atomic import clean_leftovers
 
@@ -83,40 +82,41 @@ def family_file_config(name: str, *, conf_dir: Path = CONF_DIR) -> dict[str, Any
     return {"_target_": f"{cls.__module__}.{cls.__qualname__}"}
 
 
-def family_specs(cfg: Mapping[str, Any], *, conf_dir: Path = CONF_DIR) -> list[FamilySpec]:
-    """The families this invocation fits.
+def family_specs(settings: Any, *, conf_dir: Path = CONF_DIR) -> list[FamilySpec]:
+    """The families this invocation fits (``settings``: :class:`schemas.FitConfig`, or a
+    mapping of its fields).
 
     A selected ``family`` group (``family=gamma``) gives exactly that family with its
     (possibly overridden) hyper-parameters; otherwise every name in ``families``
     (``all`` = :func:`hysteresis.family_names`), each from ``conf/family/<name>.yaml`` with
     ``family_overrides.<name>`` merged on top.
     """
-    cfg = schemas.with_defaults(schemas.FitConfig, cfg)
-    selected = cfg["family"]
-    if selected:
-        fam = dict(selected)
+    s = schemas.settings(schemas.FitConfig, settings)
+    if s.family:
+        fam = dict(s.family)
         if "_target_" not in fam:
             raise PipelineError(f"family config has no _target_: {fam}")
         cls = _target_class(str(fam["_target_"]))
         name = str(getattr(cls, "family", cls.__name__))
         return [FamilySpec(name, fam, instantiate_family, cache.source_hash(cls))]
-    wanted = cfg["families"]
-    if wanted in (None, "all"):
-        from hysteresis.base import family_names
-
-        names = family_names()
-    else:
-        names = [str(n) for n in ([wanted] if isinstance(wanted, str) else wanted)]
-    overrides = cfg["family_overrides"]
     specs = []
-    for name in names:
+    for name in _family_names(s.families):
         fam = family_file_config(name, conf_dir=conf_dir)
-        fam.update(dict(overrides.get(name) or {}))
+        fam.update(dict(s.family_overrides.get(name) or {}))
         cls = _target_class(str(fam["_target_"]))
         specs.append(FamilySpec(name, fam, instantiate_family, cache.source_hash(cls)))
     if not specs:
         raise PipelineError("no model family registered or selected")
     return specs
+
+
+def _family_names(wanted: Any) -> list[str]:
+    """``families`` as names: ``all`` (or null) = every registered family."""
+    if wanted in (None, "all"):
+        from hysteresis.base import family_names
+
+        return list(family_names())
+    return [str(n) for n in ([wanted] if isinstance(wanted, str) else wanted)]
 
 
 # --------------------------------------------------------------------------------------
@@ -205,34 +205,31 @@ def _expected_cost(task: FitTask) -> int:
     return _COST_HINT.get(task.family.name, 2)
 
 
-def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.DataFrame:
-    """Hydra-free core of the stage: config (plain mapping) in, fits table out.
+def run(settings: Any, *, dataset: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Hydra-free core of the stage: settings (:class:`schemas.FitConfig`, or a mapping of
+    its fields) in, fits table out.
 
     Reads the processed dataset (unless given), fits what is not cached, writes model files.
     """
-    cfg = schemas.with_defaults(schemas.FitConfig, cfg)
-    paths = Paths.from_config(cfg["paths"])
+    s = schemas.settings(schemas.FitConfig, settings)
+    paths = Paths.from_config(s.paths)
     clean_leftovers(paths.models)  # temporaries of a killed fit
     if dataset is None:
-        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
-    input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
-    sel = cfg["config"]
-    configs = stages.configurations(dataset, rig=sel["rig"],
-                                    curve_angle_deg=sel["curve_angle_deg"],
-                                    radius_mm=sel["radius_mm"])
-    plan = identification_plan(cfg, dataset, paths)
-    tasks = stages.plan_fits(plan.dataset, family_specs(cfg), configs,
+        dataset = read_processed(paths.processed, stage_columns(s.signals))
+    sel = s.config
+    configs = stages.configurations(dataset, rig=sel.rig, curve_angle_deg=sel.curve_angle_deg,
+                                    radius_mm=sel.radius_mm)
+    plan = identification_plan(s, dataset, paths)
+    tasks = stages.plan_fits(plan.dataset, family_specs(s), configs,
                              fit_excitations=plan.fit_excitations, fit_runs=plan.chosen,
-                             marked=plan.marked, input_col=input_col, output_col=output_col,
-                             max_samples=int(cfg["max_samples"]))
-    previous = load_models(paths.models) if cfg["cache"] else None
-    progress = bool(cfg["progress"])
-    n_jobs = int(cfg["n_jobs"])
-    if hydra_sweep_dir() is not None:
-        n_jobs = 1  # the multirun launcher already runs jobs in parallel
+                             marked=plan.marked, input_col=s.signals.input,
+                             output_col=s.signals.output, max_samples=s.max_samples)
+    previous = load_models(paths.models) if s.cache else None
+    # the multirun launcher already runs jobs in parallel
+    n_jobs = 1 if hydra_sweep_dir() is not None else s.n_jobs
     start = time.perf_counter()
     fits = stages.fit_models(tasks, previous=previous,
-                             runner=joblib_runner(n_jobs, progress=progress))
+                             runner=joblib_runner(n_jobs, progress=s.progress))
     save_models(fits, paths.models)
     fresh = int((~fits["cached"]).sum())
     log.info("fit: %d models (%d fitted, %d cached) in %.1f s", len(fits), fresh,
@@ -243,82 +240,71 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None) -> pd.Da
     return fits
 
 
-def fit_metrics(fits: pd.DataFrame, dataset: pd.DataFrame, cfg: Mapping[str, Any]
+def fit_metrics(fits: pd.DataFrame, dataset: pd.DataFrame, signals: schemas.Signals
                 ) -> pd.DataFrame:
     """In-sample metrics (split ``fit``) of the given fits, for the stage's own MLflow runs."""
-    sig = cfg["signals"]
     frames = []
     located = stages.ConfigurationRows(dataset)
     for _, group in fits.groupby(["rig", "curve_angle_deg", "radius_mm"], dropna=False):
         first = group.iloc[0]
         config = stages.Configuration(str(first["rig"]), stages._num(first["curve_angle_deg"]),
                                       stages._num(first["radius_mm"]))
-        signals = stages.run_signals(located.rows(config),
-                                     input_col=str(sig["input"]), output_col=str(sig["output"]))
-        metrics, _, _ = stages.evaluate_configuration(group, signals, heldout=[], cross=False)
+        by_kind = stages.run_signals(located.rows(config), input_col=signals.input,
+                                     output_col=signals.output)
+        metrics, _, _ = stages.evaluate_configuration(group, by_kind, heldout=[], cross=False)
         frames.append(metrics)
     return pd.concat(frames, ignore_index=True) if frames else stages.metrics_frame([])
 
 
-def main_cfg(cfg: Any) -> pd.DataFrame:
-    """What ``python -m pipelines.fit`` does with its composed config (also MLflow)."""
-    from pipelines import tracking
+@dataclass
+class FitOutcome:
+    """What the command's core gives its tracking: the fits and the dataset they came from."""
 
-    started = time.time()  # its own parent run spans the work, not only the logging
-    plain = to_container(cfg)
-    paths = Paths.from_config(plain["paths"])
-    settings = tracking.settings_from_config(plain["tracking"], root=paths.root)
-    tracker = tracking.Tracker(settings)
-    if tracker.enabled:
-        tracker.init_store()  # a locked or damaged store stops the stage before the fits
-    dataset = read_processed(paths.processed)
-    fits = run(plain, dataset=dataset)
-    if tracker.enabled:
-        # a model this store already holds (same key: data, config and code) is not logged
-        # again: a re-run that changes nothing adds no run
-        fresh = fits[~fits["key"].astype(str).isin(tracker.logged_model_keys("fit"))]
-        if fresh.empty:
-            log.info("fit: every model is already in the MLflow store; nothing new logged")
-            return fits
-        _track_fits(tracker, plain, paths, dataset, fresh, started)
-    return fits
+    fits: pd.DataFrame
+    dataset: pd.DataFrame
 
 
-def _track_fits(tracker: Any, plain: dict[str, Any], paths: Paths, dataset: pd.DataFrame,
-                fits: pd.DataFrame, started: float) -> None:
-    """The stage's parent run and one child run per model in ``fits``."""
-    from pipelines import tracking
+def _run_command(s: schemas.FitConfig) -> FitOutcome:
+    """The command reads every column once: the tracking logs the data each model saw."""
+    dataset = read_processed(Paths.from_config(s.paths).processed)
+    return FitOutcome(run(s, dataset=dataset), dataset)
 
-    with tracking.StageRun(tracker, "fit", sweep_dir=hydra_sweep_dir(),
-                            start_time=started) as stage_run:
-        assert stage_run.parent_id is not None
-        base = tracking.flatten({k: v for k, v in plain.items()
-                                 if k not in ("family", "family_overrides", "tracking")})
-        hydra_dir = hydra_output_dir()
-        plan = identification_plan(plain, dataset, paths)
+
+def _track(ctx: TrackContext, s: schemas.FitConfig, out: FitOutcome) -> None:
+    """The stage's parent run and one child run per model this store does not hold yet (same
+    key: data, config and code): a re-run that changes nothing adds no run."""
+    from pipelines import lineage, tracking
+
+    fresh = out.fits[~out.fits["key"].astype(str).isin(ctx.tracker.logged_model_keys("fit"))]
+    if fresh.empty:
+        log.info("fit: every model is already in the MLflow store; nothing new logged")
+        return
+    paths = ctx.paths
+    with ctx.parent_run() as parent:
+        base = tracking.flatten(_loggable(s, "family", "family_overrides", "tracking"))
+        plan = identification_plan(s, out.dataset, paths)
         if plan.notes:
-            tracker.log_text(stage_run.parent_id, json.dumps(dict(plan.notes), indent=1),
-                             "identification_plan.json")
+            ctx.tracker.log_text(parent, json.dumps(dict(plan.notes), indent=1),
+                                 "identification_plan.json")
+        hydra_dir = hydra_output_dir()
         ids = tracking.log_model_runs(
-            tracker, stage_run.parent_id, fits=fits,
-            metrics=fit_metrics(fits, plan.dataset, plain), base_params=base,
+            ctx.tracker, parent, fits=fresh,
+            metrics=fit_metrics(fresh, plan.dataset, s.signals), base_params=base,
             tags={"dataset_hash": dataset_hash(paths.processed)},
             hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, stage="fit",
             units=dataset_units(paths.processed),
         )
-        from pipelines import lineage
-
-        lineage.log_model_inputs(tracker, ids, fits, None, processed=paths.processed,
-                                 dataset=dataset)
+        lineage.log_model_inputs(ctx.tracker, ids, fresh, None, processed=paths.processed,
+                                 dataset=out.dataset)
 
 
-@hydra.main(config_path="../conf", config_name="fit", version_base="1.3")
-def main(cfg: Any) -> None:
-    run_stage("fit", lambda: main_cfg(cfg))
+def _loggable(s: Any, *leave_out: str) -> dict[str, Any]:
+    """The settings as MLflow params: every field but ``leave_out``."""
+    return {k: v for k, v in asdict(s).items() if k not in leave_out}
+
+
+STAGE = Stage("fit", schemas.FitConfig, run=_run_command, track=_track)
 
 
 if __name__ == "__main__":
-    from pipelines.cli import guard
-
-    guard("fit")
-    main()
+    STAGE.main()

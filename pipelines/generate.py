@@ -22,6 +22,7 @@ import os
 import sys
 import time
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -192,61 +193,73 @@ def _write_book(book_path: Path, known: Mapping[str, Any]) -> None:
     write_text_atomic(book_path, json.dumps(book, indent=1, default=str) + "\n")
 
 
-def _plain(node: Any) -> Any:
-    """OmegaConf nodes as plain containers (the manifest must be plain JSON)."""
-    try:
-        from omegaconf import DictConfig, ListConfig, OmegaConf
-    except ImportError:  # pragma: no cover
-        return node
-    if isinstance(node, DictConfig | ListConfig):
-        return OmegaConf.to_container(node, resolve=True)
-    return node
+@dataclass
+class RigGroup:
+    """The fields of a ``conf/rig/`` group the campaign uses."""
+
+    name: str = "tsm-bench"
+    sensors: Any = None
+    params: Any = None
 
 
-def specs_from_config(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """Run specs of a composed ``generate`` config (``rig``, ``campaign``, ``effects``)."""
-    cfg = _plain(cfg)
-    rig = cfg["rig"]
-    camp = cfg["campaign"]
-    return campaign_specs(seed=int(camp.get("seed", 0)), rig=str(rig.get("name", "tsm-bench")),
-                          curve_angles_deg=camp.get("curve_angles_deg"),
-                          radii_mm=camp.get("radii_mm"), excitations=camp.get("excitations"),
-                          effects=cfg.get("effects") or {}, sensors=rig.get("sensors") or {},
-                          params=rig.get("params") or {})
+@dataclass
+class CampaignGroup:
+    """The fields of a ``conf/campaign/`` group (each list as written: no type coercion,
+    the specs and their hashes keep the config's numbers)."""
+
+    seed: int = 0
+    curve_angles_deg: Any = None
+    radii_mm: Any = None
+    excitations: Any = None
 
 
-def _main() -> None:
-    import hydra
-    from omegaconf import DictConfig, OmegaConf
-
+def specs_from_config(settings: Any) -> list[dict[str, Any]]:
+    """Run specs of a ``generate`` stage's settings (:class:`schemas.GenerateConfig`, or a
+    mapping of its fields: ``rig``, ``campaign``, ``effects``)."""
     from pipelines import schemas
 
-    schemas.register()
+    s = schemas.settings(schemas.GenerateConfig, settings)
+    rig = schemas.settings(RigGroup, s.rig or {})
+    camp = schemas.settings(CampaignGroup, s.campaign or {})
+    return campaign_specs(seed=camp.seed, rig=rig.name, curve_angles_deg=camp.curve_angles_deg,
+                          radii_mm=camp.radii_mm, excitations=camp.excitations,
+                          effects=s.effects or {}, sensors=rig.sensors or {},
+                          params=rig.params or {})
 
-    @hydra.main(config_path="../conf", config_name="generate", version_base="1.3")
-    def main(cfg: DictConfig) -> None:
-        conf = OmegaConf.to_container(cfg, resolve=True)
-        assert isinstance(conf, dict)
-        try:
-            specs = specs_from_config(conf)  # type: ignore[arg-type]
-            report = run_generate(specs, conf["out"], fmt=str(conf["format"]),
-                                  compress=bool(conf["compress"]), n_jobs=int(conf["n_jobs"]),
-                                  overwrite=bool(conf["overwrite"]),
-                                  progress=bool(conf["progress"]))
-        except (GenerateError, ValueError) as err:
-            print(f"generate: error: {err}", file=sys.stderr)
-            raise SystemExit(2) from None
-        except WriteError as err:  # a full disk ...: the stage failed, one line
-            print(f"generate: {err}", file=sys.stderr)
-            raise SystemExit(1) from None
-        print(f"generate: {len(report['written'])} runs written, {len(report['skipped'])} "
-              f"unchanged, {report['seconds']:.1f} s -> {report['out']} ({report['format']})")
 
-    main()
+def generate(settings: Any) -> dict[str, Any]:
+    """The stage's core: the campaign of ``settings`` (:class:`schemas.GenerateConfig`)
+    written under its ``out``; the report of :func:`run_generate`."""
+    from pipelines import schemas
+
+    s = schemas.settings(schemas.GenerateConfig, settings)
+    return run_generate(specs_from_config(s), s.out, fmt=s.format, compress=s.compress,
+                        n_jobs=s.n_jobs, overwrite=s.overwrite, progress=s.progress)
+
+
+def _command(s: Any) -> dict[str, Any]:
+    """``python -m pipelines.generate``: one line of what was done; a bad option or a clash
+    is exit 2, an output that cannot be written exit 1."""
+    try:
+        report = generate(s)
+    except (GenerateError, ValueError) as err:
+        print(f"generate: error: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except WriteError as err:  # a full disk ...: the stage failed, one line
+        print(f"generate: {err}", file=sys.stderr)
+        raise SystemExit(1) from None
+    print(f"generate: {len(report['written'])} runs written, {len(report['skipped'])} "
+          f"unchanged, {report['seconds']:.1f} s -> {report['out']} ({report['format']})")
+    return report
+
+
+def stage() -> Any:
+    """The command's :class:`pipelines.skeleton.Stage`."""
+    from pipelines import schemas
+    from pipelines.skeleton import Stage
+
+    return Stage("generate", schemas.GenerateConfig, run=_command)
 
 
 if __name__ == "__main__":
-    from pipelines.cli import guard
-
-    guard("generate")
-    _main()
+    stage().main()

@@ -224,52 +224,49 @@ def _prune(dst: Path, runs: dict[str, dict[str, Any]]) -> list[str]:
     return removed
 
 
-def _plain_section(section: Any) -> dict[str, Any]:
-    from omegaconf import OmegaConf
-
-    loaded = OmegaConf.to_container(section, resolve=True)
-    assert isinstance(loaded, dict)
-    return {str(k): v for k, v in loaded.items()}
-
-
-def _main() -> None:
-    import hydra
-    from omegaconf import DictConfig
-
+def ingest(settings: Any) -> dict[str, Any]:
+    """The stage's core: ``source`` of ``settings`` (:class:`schemas.IngestConfig`, or a
+    mapping of its fields) ingested into its ``out``; the report of :func:`run_ingest`.
+    Relative folders are the caller's (the command's working folder)."""
     from pipelines import schemas
 
-    schemas.register()
+    s = schemas.settings(schemas.IngestConfig, settings)
+    return run_ingest(_absolute(s.source), _absolute(s.out), mapping=s.importer, sync=s.sync,
+                      force=s.force, prune=s.prune, progress=s.progress, limits=s.limits)
 
-    @hydra.main(config_path="../conf", config_name="ingest", version_base="1.3")
-    def main(cfg: DictConfig) -> None:
+
+def _absolute(path: str) -> str:
+    """``path`` against the folder the command was started in (Hydra's, when under Hydra)."""
+    try:
         from hydra.utils import to_absolute_path
 
-        mapping = _plain_section(cfg.importer) if cfg.importer is not None else None
-        sync = SyncOptions(**_plain_section(cfg.sync))
-        try:
-            report = run_ingest(to_absolute_path(str(cfg.source)),
-                                to_absolute_path(str(cfg.out)), mapping=mapping, sync=sync,
-                                force=bool(cfg.force), prune=bool(cfg.prune),
-                                progress=bool(cfg.progress), limits=ReadLimits.from_mapping(
-                                    _plain_section(cfg.limits)))
-        except RigIOError as err:
-            print(f"ingest: {err}", file=sys.stderr)
-            raise SystemExit(2) from None
-        print(f"ingest: {report['n_accepted']} accepted ({report['n_processed']} processed), "
-              f"{report['n_rejected']} rejected, {report['n_samples']} samples in "
-              f"{report['elapsed_s']:.1f} s -> {report['out']}", file=sys.stderr)
-        for r in report["rejected"]:
-            print(f"  rejected {r['source']}: {r['reason']}", file=sys.stderr)
-        if report["refused"]:
-            print(f"ingest: refused: {report['refused']}", file=sys.stderr)
-        if report["n_rejected"]:
-            raise SystemExit(1)
+        return to_absolute_path(path)
+    except ValueError:  # not inside a Hydra app
+        return os.path.abspath(path)
 
-    main()
+
+def _command(s: Any) -> dict[str, Any]:
+    """``python -m pipelines.ingest``: a summary on stderr; exit 1 when a run was rejected."""
+    report = ingest(s)
+    print(f"ingest: {report['n_accepted']} accepted ({report['n_processed']} processed), "
+          f"{report['n_rejected']} rejected, {report['n_samples']} samples in "
+          f"{report['elapsed_s']:.1f} s -> {report['out']}", file=sys.stderr)
+    for r in report["rejected"]:
+        print(f"  rejected {r['source']}: {r['reason']}", file=sys.stderr)
+    if report["refused"]:
+        print(f"ingest: refused: {report['refused']}", file=sys.stderr)
+    if report["n_rejected"]:
+        raise SystemExit(1)
+    return report
+
+
+def stage() -> Any:
+    """The command's :class:`pipelines.skeleton.Stage`."""
+    from pipelines import schemas
+    from pipelines.skeleton import Stage
+
+    return Stage("ingest", schemas.IngestConfig, run=_command)
 
 
 if __name__ == "__main__":
-    from pipelines.cli import guard
-
-    guard("ingest")
-    _main()
+    stage().main()

@@ -18,26 +18,18 @@ import logging
 import re
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import hydra
 import numpy as np
 import pandas as pd
 
 from hysteresis.play import play_matrix
 from pipelines import cache, schemas, stages
 from pipelines.artifacts import load_models, prediction_path, read_prediction_meta
-from pipelines.common import (
-    Paths,
-    dataset_hash,
-    dataset_units,
-    hydra_output_dir,
-    hydra_sweep_dir,
-    run_stage,
-    to_container,
-)
+from pipelines.common import Paths, dataset_hash, dataset_units, hydra_sweep_dir
+from pipelines.skeleton import KeyFile, Stage, TrackContext
 from pipelines.stages import Configuration, PipelineError
 from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
 
@@ -186,12 +178,13 @@ def _config_of(row: Mapping[str, Any]) -> Configuration:
                          stages._num(row["radius_mm"]))
 
 
-def pick_exemplary(configs: Sequence[Configuration], wanted: Mapping[str, Any]) -> Configuration:
-    """The configured exemplary shape, else the largest angle with the smallest radius."""
+def pick_exemplary(configs: Sequence[Configuration], wanted: Any) -> Configuration:
+    """The configured exemplary shape (:class:`schemas.ExemplaryShape`, or a mapping of its
+    fields), else the largest angle with the smallest radius."""
+    shape = schemas.settings(schemas.ExemplaryShape, wanted)
     for c in configs:
-        if (c.rig == wanted.get("rig") and stages._matches(c.curve_angle_deg,
-                                                           [wanted.get("curve_angle_deg")])
-                and stages._matches(c.radius_mm, [wanted.get("radius_mm")])):
+        if (c.rig == shape.rig and stages._matches(c.curve_angle_deg, [shape.curve_angle_deg])
+                and stages._matches(c.radius_mm, [shape.radius_mm])):
             return c
     return sorted(configs, key=lambda c: (-(c.curve_angle_deg or 0), c.radius_mm or 0))[0]
 
@@ -260,26 +253,69 @@ def _plot_configuration(pred_path: Path, out: Path, title: str, fit_excitation: 
                                       dpi=dpi, max_points=max_points, units=units)
 
 
-def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
-        fits: pd.DataFrame | None = None) -> ReportResult:
-    """Hydra-free core: config in, :class:`ReportResult` out; writes under reports/."""
-    from pipelines import plots
+@dataclass
+class _Inputs:
+    """What the report is drawn from (the other stages' outputs)."""
 
+    paths: Paths
+    metrics: pd.DataFrame
+    fits: pd.DataFrame
+    configs: list[Configuration]
+    #: configuration label -> the key of its (intact) predictions file, None when missing
+    pred_keys: dict[str, Any]
+    units: tuple[str, str]
+    by_run: pd.DataFrame
+
+
+def run(settings: Any, *, metrics: pd.DataFrame | None = None,
+        fits: pd.DataFrame | None = None) -> ReportResult:
+    """Hydra-free core: settings (:class:`schemas.ReportConfig`, or a mapping of its fields)
+    in, :class:`ReportResult` out; writes under reports/."""
     start = time.perf_counter()
-    cfg = schemas.with_defaults(schemas.ReportConfig, cfg)
-    paths = Paths.from_config(cfg["paths"])
+    s = schemas.settings(schemas.ReportConfig, settings)
+    paths = Paths.from_config(s.paths)
     clean_leftovers(paths.reports)  # temporaries of a killed report
     reports = paths.reports
+    inputs = _inputs(s, paths, metrics, fits)
+    key = _content_key(s, inputs)
+    keyfile = KeyFile(reports / KEY_FILE, enabled=s.cache, needs=(reports / "report.md",),
+                      with_files=True)
+    record = keyfile.hit(key)
+    if record is not None:
+        log.info("report: up to date (%s)", key)
+        return ReportResult(reports, [Path(f) for f in record["files"]],
+                            {k: [Path(p) for p in v]
+                             for k, v in record.get("config_plots", {}).items()},
+                            cached=True, key=key, seconds=time.perf_counter() - start)
+    tables = _write_tables(s, inputs)
+    figures = _draw_figures(s, inputs)
+    config_plots = figures.config_plots
+    files = [*tables.written, *figures.files, *(p for _, p in figures.shape_figs)]
+    doc = _document(reports, metrics=inputs.metrics, fits=inputs.fits, tables=tables,
+                    metric=s.metric, fit_exc=s.fit_excitation, figures=figures,
+                    paths=paths, units=inputs.units, by_run=inputs.by_run)
+    if "md" in s.formats:
+        files.append(write_text_atomic(reports / "report.md", doc.markdown()))
+    if "html" in s.formats:
+        files.append(write_text_atomic(reports / "report.html",
+                                       doc.html("TSM hysteresis pipeline report")))
+    keyfile.store(key, files=files,
+                  config_plots={k: [str(p) for p in v] for k, v in config_plots.items()})
+    seconds = time.perf_counter() - start
+    log.info("report: %d files in %.1f s -> %s", len(files), seconds, reports / "report.md")
+    return ReportResult(reports, files, config_plots, cached=False, key=key, seconds=seconds)
+
+
+def _inputs(s: schemas.ReportConfig, paths: Paths, metrics: pd.DataFrame | None,
+            fits: pd.DataFrame | None) -> _Inputs:
+    """The metrics (given, or validate's file), the fits of the report's excitation, the
+    keys of the intact predictions, the units and the per-run scores."""
     if metrics is None:
         if not paths.metrics_parquet.exists():
             raise PipelineError(f"{paths.metrics_parquet} does not exist; run `make validate`")
         metrics = pd.read_parquet(paths.metrics_parquet)
     if metrics.empty:
         raise PipelineError("the metrics table is empty: nothing to report")
-    fit_exc = str(cfg["fit_excitation"])
-    metric = str(cfg["metric"])
-    plot_cfg = cfg["plots"]
-    dpi, max_points = int(plot_cfg["dpi"]), int(plot_cfg["max_points"])
     configs = sorted({_config_of(r) for r in metrics.to_dict("records")},
                      key=lambda c: (c.rig, c.curve_angle_deg or -1, c.radius_mm or -1))
     if fits is None:
@@ -287,69 +323,83 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
     labels = {c.label for c in configs}
     fits = fits[fits.apply(lambda r: _config_of(r).label in labels, axis=1)
                 if not fits.empty else []]
-    fits = fits[fits["fit_excitation"] == fit_exc].reset_index(drop=True)
+    fits = fits[fits["fit_excitation"] == s.fit_excitation].reset_index(drop=True)
     # Only predictions whose bytes match their recorded hash are drawn (and keyed): a damaged
     # file is left out of the figures instead of passing for the one validate wrote.
     pred_keys = {c.label: (read_prediction_meta(prediction_path(paths.predictions, c)) or {})
                  .get("key") for c in configs}
-    settings = {k: v for k, v in cfg.items() if k not in ("paths", "tracking", "n_jobs",
-                                                          "cache")}
-    # The unseen-shape stage's summary, shown when it was written (it runs before the report).
-    unseen_csv = reports / "unseen_shape_summary.csv"
-    units = dataset_units(paths.processed)
-    by_run_file = reports / "metrics_by_run.parquet"
+    by_run_file = paths.reports / "metrics_by_run.parquet"
     by_run = pd.read_parquet(by_run_file) if by_run_file.exists() else pd.DataFrame()
-    key = cache.combine({
-        "stage": "report", "metrics": cache.hash_frame(metrics), "units": list(units),
-        "by_run": cache.hash_frame(by_run) if not by_run.empty else "",
+    return _Inputs(paths, metrics, fits, configs, pred_keys, dataset_units(paths.processed),
+                   by_run)
+
+
+def _content_key(s: schemas.ReportConfig, inputs: _Inputs) -> str:
+    """What the report is made from: its inputs, its settings and its code."""
+    from pipelines import plots
+
+    # The unseen-shape stage's summary, shown when it was written (it runs before the report).
+    unseen_csv = inputs.paths.reports / "unseen_shape_summary.csv"
+    keyed = {k: v for k, v in asdict(s).items()
+             if k not in ("paths", "tracking", "n_jobs", "cache")}
+    return cache.combine({
+        "stage": "report", "metrics": cache.hash_frame(inputs.metrics),
+        "units": list(inputs.units),
+        "by_run": cache.hash_frame(inputs.by_run) if not inputs.by_run.empty else "",
         "unseen_shape": cache.hash_files([unseen_csv]) if unseen_csv.exists() else "",
-        "models": sorted(fits["key"].astype(str)), "predictions": pred_keys,
-        "settings": settings,
+        "models": sorted(inputs.fits["key"].astype(str)), "predictions": inputs.pred_keys,
+        "settings": keyed,
         "code": cache.hash_files([Path(__file__), Path(plots.__file__)]),
     })
-    key_file = reports / KEY_FILE
-    if cfg["cache"] and key_file.exists() and (reports / "report.md").exists():
-        try:
-            record = json.loads(key_file.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError):
-            record = {}
-        digests = record.get("sha256") or {}
-        if (record.get("key") == key and set(digests) == set(record.get("files", []))
-                and cache.files_intact(digests)):
-            log.info("report: up to date (%s)", key)
-            return ReportResult(reports, [Path(f) for f in record["files"]],
-                                {k: [Path(p) for p in v]
-                                 for k, v in record.get("config_plots", {}).items()},
-                                cached=True, key=key, seconds=time.perf_counter() - start)
 
+
+@dataclass
+class _Tables:
+    gamma: pd.DataFrame
+    board: pd.DataFrame
+    summary: pd.DataFrame
+    general: pd.DataFrame
+    written: list[Path] = field(default_factory=list)
+
+
+def _write_tables(s: schemas.ReportConfig, inputs: _Inputs) -> _Tables:
+    """Gamma weights, leaderboard, family summary and the generalisation table."""
+    reports, metrics = inputs.paths.reports, inputs.metrics
     files: list[Path] = []
-    plots_dir = reports / "plots"
-    # -- tables ------------------------------------------------------------------------
-    gamma = stages.gamma_weights_table(fits, metrics)
+    gamma = stages.gamma_weights_table(inputs.fits, metrics)
     files += _write_table(gamma, reports / "gamma_weights")
-    board = stages.leaderboard(metrics[metrics["fit_excitation"] == fit_exc], metric=metric)
+    board = stages.leaderboard(metrics[metrics["fit_excitation"] == s.fit_excitation],
+                               metric=s.metric)
     files += _write_table(board, reports / "leaderboard")
-    summary = stages.family_summary(board, metric=metric) if not board.empty else board
+    summary = stages.family_summary(board, metric=s.metric) if not board.empty else board
     with atomic_path(reports / "family_summary.csv") as tmp:
         summary.to_csv(tmp, index=False)
     files.append(reports / "family_summary.csv")
-    general = generalisation_table(metrics, fit_excitation=fit_exc, metric=metric)
+    general = generalisation_table(metrics, fit_excitation=s.fit_excitation, metric=s.metric)
     with atomic_path(reports / "generalisation.csv") as tmp:
         general.to_csv(tmp, index=False)
     files.append(reports / "generalisation.csv")
+    return _Tables(gamma, board, summary, general, files)
 
-    # -- figures -----------------------------------------------------------------------
-    config_plots: dict[str, list[Path]] = {}
-    jobs = []
-    if plot_cfg["per_configuration"]:
-        for c in configs:
-            if pred_keys[c.label] is None:
-                continue
-            out = contained(plots_dir, f"config_{c.label}.png")
-            title = (f"{c.rig}  phi={c.curve_angle_deg:g} deg  r={c.radius_mm:g} mm"
-                     if c.curve_angle_deg is not None and c.radius_mm is not None else c.label)
-            jobs.append((c.label, prediction_path(paths.predictions, c), out, title))
-    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg["n_jobs"])
+
+@dataclass
+class _Figures:
+    exemplary: Configuration
+    elementary: Path | None
+    #: the per-configuration figures and the elementary one, in the order drawn
+    files: list[Path] = field(default_factory=list)
+    config_plots: dict[str, list[Path]] = field(default_factory=dict)
+    shape_figs: list[tuple[str, Path]] = field(default_factory=list)
+
+
+def _draw_figures(s: schemas.ReportConfig, inputs: _Inputs) -> _Figures:
+    """Each configuration's figure, the exemplary one's elementary operators, and the error
+    over the shapes."""
+    paths, fit_exc = inputs.paths, s.fit_excitation
+    plots_dir = paths.reports / "plots"
+    dpi, max_points, units = s.plots.dpi, s.plots.max_points, inputs.units
+    jobs = _configuration_jobs(s, inputs) if s.plots.per_configuration else []
+    n_jobs = 1 if hydra_sweep_dir() is not None else s.n_jobs
     if n_jobs > 1 and len(jobs) > 1:
         from joblib import Parallel, delayed
 
@@ -358,52 +408,59 @@ def run(cfg: Mapping[str, Any], *, metrics: pd.DataFrame | None = None,
     else:
         made = [_plot_configuration(p, o, t, fit_exc, dpi, max_points, units)
                 for _, p, o, t in jobs]
+    config_plots: dict[str, list[Path]] = {}
+    files: list[Path] = []
     for (label, *_), path in zip(jobs, made, strict=True):
         if path is not None:
             config_plots.setdefault(label, []).append(path)
             files.append(path)
+    exemplary = pick_exemplary(inputs.configs, s.exemplary)
+    figures = _Figures(exemplary, _elementary_plot(inputs.fits, exemplary, paths, fit_exc,
+                                                   plots_dir, dpi, max_points, units),
+                       files, config_plots)
+    if figures.elementary is not None:
+        figures.files.append(figures.elementary)
+        figures.config_plots.setdefault(exemplary.label, []).append(figures.elementary)
+    figures.shape_figs = _shape_figures(s, inputs.metrics, plots_dir)
+    return figures
 
-    exemplary = pick_exemplary(configs, cfg["exemplary"])
-    elementary = _elementary_plot(fits, exemplary, paths, fit_exc, plots_dir, dpi, max_points,
-                                  units)
-    if elementary is not None:
-        files.append(elementary)
-        config_plots.setdefault(exemplary.label, []).append(elementary)
+
+def _configuration_jobs(s: schemas.ReportConfig, inputs: _Inputs
+                        ) -> list[tuple[str, Path, Path, str]]:
+    """(label, predictions file, figure file, title) of every configuration with intact
+    predictions."""
+    jobs = []
+    for c in inputs.configs:
+        if inputs.pred_keys[c.label] is None:
+            continue
+        out = contained(inputs.paths.reports / "plots", f"config_{c.label}.png")
+        title = (f"{c.rig}  phi={c.curve_angle_deg:g} deg  r={c.radius_mm:g} mm"
+                 if c.curve_angle_deg is not None and c.radius_mm is not None else c.label)
+        jobs.append((c.label, prediction_path(inputs.paths.predictions, c), out, title))
+    return jobs
+
+
+def _shape_figures(s: schemas.ReportConfig, metrics: pd.DataFrame, plots_dir: Path
+                   ) -> list[tuple[str, Path]]:
+    """Error against curve angle and radius: heatmaps (held-out metric, in-sample SSE) and
+    lines of the held-out metric."""
+    from pipelines import plots
+
+    metric, dpi = s.metric, s.plots.dpi
+    sub = metrics[metrics["fit_excitation"] == s.fit_excitation]
     shape_figs = []
     for split, m in (("heldout", metric), ("fit", "sse")):
-        sub = metrics[metrics["fit_excitation"] == fit_exc]
         fig = plots.shape_heatmaps(sub, plots_dir / f"heatmap_{split}_{m}.png", metric=m,
                                    split=split, title=f"{split} {m} vs curve angle and radius",
                                    dpi=dpi)
         if fig is not None:
             shape_figs.append((f"{split} {m} over curve angle x radius", fig))
-    line = plots.error_vs_shape_lines(metrics[metrics["fit_excitation"] == fit_exc],
-                                      plots_dir / f"lines_heldout_{metric}.png", metric=metric,
-                                      split="heldout", title=f"held-out {metric} vs curve angle",
-                                      dpi=dpi)
+    line = plots.error_vs_shape_lines(sub, plots_dir / f"lines_heldout_{metric}.png",
+                                      metric=metric, split="heldout",
+                                      title=f"held-out {metric} vs curve angle", dpi=dpi)
     if line is not None:
         shape_figs.append((f"held-out {metric} vs curve angle, one line per radius", line))
-    files += [p for _, p in shape_figs]
-
-    # -- the document --------------------------------------------------------------------
-    doc = _document(reports, metrics=metrics, fits=fits, gamma=gamma, board=board,
-                    summary=summary, general=general, metric=metric, fit_exc=fit_exc,
-                    exemplary=exemplary,
-                    config_plots=config_plots, shape_figs=shape_figs, elementary=elementary,
-                    paths=paths, units=units, by_run=by_run)
-    formats = list(cfg["formats"])
-    if "md" in formats:
-        files.append(write_text_atomic(reports / "report.md", doc.markdown()))
-    if "html" in formats:
-        files.append(write_text_atomic(reports / "report.html",
-                                       doc.html("TSM hysteresis pipeline report")))
-    write_text_atomic(key_file, json.dumps({
-        "key": key, "files": [str(f) for f in files], "sha256": cache.file_digests(files),
-        "config_plots": {k: [str(p) for p in v] for k, v in config_plots.items()},
-    }, indent=1))
-    seconds = time.perf_counter() - start
-    log.info("report: %d files in %.1f s -> %s", len(files), seconds, reports / "report.md")
-    return ReportResult(reports, files, config_plots, cached=False, key=key, seconds=seconds)
+    return shape_figs
 
 
 def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fit_exc: str,
@@ -439,100 +496,129 @@ def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fi
               f"({fit_exc}; seed 001 Fig. 4.12)", dpi=dpi, max_points=max_points, units=units)
 
 
-def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, gamma: pd.DataFrame,
-              board: pd.DataFrame, summary: pd.DataFrame, general: pd.DataFrame, metric: str,
-              fit_exc: str,
-              exemplary: Configuration, config_plots: Mapping[str, list[Path]],
-              shape_figs: Sequence[tuple[str, Path]], elementary: Path | None,
-              paths: Paths, units: tuple[str, str] = ("mm", "mm"),
+def _document(root: Path, *, metrics: pd.DataFrame, fits: pd.DataFrame, tables: _Tables,
+              metric: str, fit_exc: str, figures: _Figures, paths: Paths,
+              units: tuple[str, str] = ("mm", "mm"),
               by_run: pd.DataFrame | None = None) -> Doc:
     doc = Doc(root)
     unit = units[1]
     n_cfg = metrics.groupby(["rig", "curve_angle_deg", "radius_mm"], dropna=False).ngroups
     doc.h(1, "TSM hysteresis pipeline report")
-    doc.headline(stages.headline(summary, metric=metric, unit=unit))
+    doc.headline(stages.headline(tables.summary, metric=metric, unit=unit))
     doc.p(f"{metrics['family'].nunique()} families x {n_cfg} configurations; identification "
           f"excitation `{fit_exc}`; {len(metrics)} metric rows "
           f"(`metrics.parquet`, `metrics.csv`). Dataset hash `{dataset_hash(paths.processed)}`."
           f" Ranking metric: mean held-out {metric}. Input in {units[0]}, output in {unit}.")
     doc.h(2, "Families over all configurations")
-    doc.table(with_units(summary, unit))
+    doc.table(with_units(tables.summary, unit))
     if by_run is not None and not by_run.empty:
         _per_run_section(doc, by_run, metric=metric, unit=unit)
-    if not general.empty:
-        doc.h(2, f"Held-out / in-sample {metric} per family and excitation")
-        doc.p(f"Each model's {metric} on an excitation it was not identified on, divided by its "
-              f"{metric} on its own `{fit_exc}` record (median, min, max over the "
-              "configurations; `generalisation.csv`). `mixed_sine` (seed 001 eq. 4.11 at "
-              "other amplitudes) and `band_random` (non-periodic, drifting amplitude and rate) "
-              "are evaluation-only: a ratio near 1 there means the model generalises.")
-        doc.table(with_units(general, unit))
-    unseen_csv = paths.reports / "unseen_shape_summary.csv"
-    unseen = pd.read_csv(unseen_csv) if unseen_csv.exists() else pd.DataFrame()
-    if not unseen.empty:
-        doc.h(2, "Shapes no model was fitted on (leave-one-configuration-out)")
-        doc.p("Median RMSE (mm) over the configurations of each one's evaluation runs, predicted "
-              "by its own model, by the nearest other configuration's model, and by the "
-              "shape-aware model fitted without it (`unseen_shape.parquet`, "
-              "`docs/unseen-shape.md`). Targets: shape-aware / own <= 1.15 and shape-aware "
-              "below nearest in >= 20 of 24 configurations.")
-        doc.table(with_units(unseen, unit, also=("median_own", "median_nearest",
-                                                 "median_shape_aware")))
-        fig = paths.reports / "plots" / "unseen_shape.png"
-        if fig.exists():
-            doc.img(fig, "Leave-one-configuration-out RMSE per configuration")
-    doc.h(2, f"Leaderboard per configuration (held-out {metric}, winner in the last column)")
-    if not board.empty:
-        wide = board.pivot_table(index=["rig", "curve_angle_deg", "radius_mm"],
-                                 columns="family", values=f"heldout_{metric}",
-                                 dropna=False, observed=True)
-        winners = (board[board["rank"] == 1].groupby(["rig", "curve_angle_deg", "radius_mm"],
-                                                     dropna=False)["family"]
-                   .agg(lambda s: "/".join(sorted(s))))
-        wide["best"] = winners
-        wide.columns = [f"{c} [{unit}]" if c != "best" else c for c in wide.columns]
-        doc.table(with_units(wide.reset_index(), unit))
+    _generalisation_section(doc, tables.general, metric=metric, fit_exc=fit_exc, unit=unit)
+    _unseen_shape_section(doc, paths, unit=unit)
+    _leaderboard_section(doc, tables.board, metric=metric, unit=unit)
     doc.h(2, "Table 4.1 equivalent: Gamma weights Q and SSE per configuration")
     doc.p(f"{_gamma_constraint_text(fits)} SSE on the identification record(s) at the rig's "
           f"sample rate, in {unit}^2 (`gamma_weights.parquet`).")
-    if not gamma.empty:
+    if not tables.gamma.empty:
         doc.p(f"Weights are printed to 3 decimals (in {unit} of output per {units[0]} of "
               "input): a weight below 0.0005 is a solver's zero, not a finding.")
-        doc.table(gamma_table(gamma, units))
-    if metrics["fit_excitation"].nunique() > 1:
-        doc.h(2, f"Cross-excitation matrix (mean {metric} over the configurations)")
-        doc.p("Rows: the model's identification excitation; columns: the evaluated one.")
-        cross = metrics.pivot_table(index=["family", "fit_excitation"],
-                                    columns="eval_excitation", values=metric, aggfunc="mean",
-                                    observed=True)
-        cross.columns = [f"{c} [{unit}]" for c in cross.columns]
-        doc.table(cross.reset_index())
+        doc.table(gamma_table(tables.gamma, units))
+    _cross_section(doc, metrics, metric=metric, unit=unit)
+    _figures_sections(doc, figures, tables.board, metric=metric, unit=unit)
+    _failures_section(doc, fits, paths, unit=unit)
+    return doc
+
+
+def _generalisation_section(doc: Doc, general: pd.DataFrame, *, metric: str, fit_exc: str,
+                            unit: str) -> None:
+    if general.empty:
+        return
+    doc.h(2, f"Held-out / in-sample {metric} per family and excitation")
+    doc.p(f"Each model's {metric} on an excitation it was not identified on, divided by its "
+          f"{metric} on its own `{fit_exc}` record (median, min, max over the "
+          "configurations; `generalisation.csv`). `mixed_sine` (seed 001 eq. 4.11 at "
+          "other amplitudes) and `band_random` (non-periodic, drifting amplitude and rate) "
+          "are evaluation-only: a ratio near 1 there means the model generalises.")
+    doc.table(with_units(general, unit))
+
+
+def _unseen_shape_section(doc: Doc, paths: Paths, *, unit: str) -> None:
+    unseen_csv = paths.reports / "unseen_shape_summary.csv"
+    unseen = pd.read_csv(unseen_csv) if unseen_csv.exists() else pd.DataFrame()
+    if unseen.empty:
+        return
+    doc.h(2, "Shapes no model was fitted on (leave-one-configuration-out)")
+    doc.p("Median RMSE (mm) over the configurations of each one's evaluation runs, predicted "
+          "by its own model, by the nearest other configuration's model, and by the "
+          "shape-aware model fitted without it (`unseen_shape.parquet`, "
+          "`docs/unseen-shape.md`). Targets: shape-aware / own <= 1.15 and shape-aware "
+          "below nearest in >= 20 of 24 configurations.")
+    doc.table(with_units(unseen, unit, also=("median_own", "median_nearest",
+                                             "median_shape_aware")))
+    fig = paths.reports / "plots" / "unseen_shape.png"
+    if fig.exists():
+        doc.img(fig, "Leave-one-configuration-out RMSE per configuration")
+
+
+def _leaderboard_section(doc: Doc, board: pd.DataFrame, *, metric: str, unit: str) -> None:
+    doc.h(2, f"Leaderboard per configuration (held-out {metric}, winner in the last column)")
+    if board.empty:
+        return
+    wide = board.pivot_table(index=["rig", "curve_angle_deg", "radius_mm"],
+                             columns="family", values=f"heldout_{metric}",
+                             dropna=False, observed=True)
+    winners = (board[board["rank"] == 1].groupby(["rig", "curve_angle_deg", "radius_mm"],
+                                                 dropna=False)["family"]
+               .agg(lambda s: "/".join(sorted(s))))
+    wide["best"] = winners
+    wide.columns = [f"{c} [{unit}]" if c != "best" else c for c in wide.columns]
+    doc.table(with_units(wide.reset_index(), unit))
+
+
+def _cross_section(doc: Doc, metrics: pd.DataFrame, *, metric: str, unit: str) -> None:
+    if metrics["fit_excitation"].nunique() <= 1:
+        return
+    doc.h(2, f"Cross-excitation matrix (mean {metric} over the configurations)")
+    doc.p("Rows: the model's identification excitation; columns: the evaluated one.")
+    cross = metrics.pivot_table(index=["family", "fit_excitation"],
+                                columns="eval_excitation", values=metric, aggfunc="mean",
+                                observed=True)
+    cross.columns = [f"{c} [{unit}]" for c in cross.columns]
+    doc.table(cross.reset_index())
+
+
+def _figures_sections(doc: Doc, figures: _Figures, board: pd.DataFrame, *, metric: str,
+                      unit: str) -> None:
     doc.h(2, "Error against curve angle and radius")
-    for caption, fig in shape_figs:
+    for caption, fig in figures.shape_figs:
         doc.img(fig, caption)
+    exemplary, elementary = figures.exemplary, figures.elementary
     doc.h(2, f"Exemplary configuration {exemplary.label}")
-    for fig in config_plots.get(exemplary.label, []):
+    for fig in figures.config_plots.get(exemplary.label, []):
         if fig != elementary:
             doc.img(fig, f"Measured vs the best family, every family's residual, and the loop "
-                            f"({exemplary.label})")
+                         f"({exemplary.label})")
     if elementary is not None:
         doc.img(elementary, "Weighted elementary operators of Gamma (seed 001 Fig. 4.12)")
     doc.h(2, "Every configuration")
     doc.p("Each configuration's figure: measured output and the best family, every family's "
           "residual with its RMSE, and the best family's loop (click for full size).")
     doc.thumbs([(_thumb_caption(label, board, metric, unit), figs[0])
-                for label, figs in sorted(config_plots.items()) if figs])
+                for label, figs in sorted(figures.config_plots.items()) if figs])
+
+
+def _failures_section(doc: Doc, fits: pd.DataFrame, paths: Paths, *, unit: str) -> None:
     failed = fits[fits["error"].notna()] if "error" in fits else fits.iloc[0:0]
     errors_file = paths.reports / "validate_errors.json"
     val_errors = json.loads(errors_file.read_text()) if errors_file.exists() else []
-    if len(failed) or val_errors:
-        doc.h(2, "Failures")
-        if len(failed):
-            doc.table(with_units(failed[["family", "rig", "curve_angle_deg", "radius_mm",
-                                         "error"]], unit))
-        for e in val_errors:
-            doc.p(f"validate: {e}")
-    return doc
+    if not len(failed) and not val_errors:
+        return
+    doc.h(2, "Failures")
+    if len(failed):
+        doc.table(with_units(failed[["family", "rig", "curve_angle_deg", "radius_mm",
+                                     "error"]], unit))
+    for e in val_errors:
+        doc.p(f"validate: {e}")
 
 
 #: Metric columns in the output's unit (the others are counts, ranks or ratios).
@@ -627,27 +713,6 @@ def _gamma_constraint_text(fits: pd.DataFrame) -> str:
     return "Weights identified " + "; ".join(said.get(c, c) for c in sorted(seen)) + "."
 
 
-def main_cfg(cfg: Any) -> ReportResult:
-    """What ``python -m pipelines.report`` does with its composed config (also MLflow)."""
-    from pipelines import tracking
-
-    started = time.time()  # its own parent run spans the work, not only the logging
-    plain = to_container(cfg)
-    paths = Paths.from_config(plain["paths"])
-    result = run(plain)
-    tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
-                                                             root=paths.root))
-    if tracker.enabled:
-        with tracking.StageRun(tracker, "report", sweep_dir=hydra_sweep_dir(),
-                                start_time=started) as stage_run:
-            assert stage_run.parent_id is not None
-            log_report(tracker, stage_run.parent_id, result)
-            hydra_dir = hydra_output_dir()
-            if hydra_dir is not None:
-                tracker.log_artifact(stage_run.parent_id, hydra_dir / ".hydra", ".hydra")
-    return result
-
-
 def log_report(tracker: Any, run_id: str, result: ReportResult) -> None:
     """Report files and tables onto a run (the pipeline's parent run or a report run)."""
     reports = result.reports_dir
@@ -665,13 +730,15 @@ def log_report(tracker: Any, run_id: str, result: ReportResult) -> None:
             tracker.log_artifact(run_id, f, "report/plots")
 
 
-@hydra.main(config_path="../conf", config_name="report", version_base="1.3")
-def main(cfg: Any) -> None:
-    run_stage("report", lambda: main_cfg(cfg))
+def _track(ctx: TrackContext, s: schemas.ReportConfig, result: ReportResult) -> None:
+    """The stage's parent run holds the report's files and tables."""
+    with ctx.parent_run() as parent:
+        log_report(ctx.tracker, parent, result)
+        ctx.log_hydra(parent)
+
+
+STAGE = Stage("report", schemas.ReportConfig, run=run, track=_track)
 
 
 if __name__ == "__main__":
-    from pipelines.cli import guard
-
-    guard("report")
-    main()
+    STAGE.main()

@@ -26,7 +26,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -82,25 +82,70 @@ class TrackingSettings:
         return (self.root / "mlartifacts").resolve().as_uri()
 
 
-def settings_from_config(tracking: Mapping[str, Any], *, root: str | Path) -> TrackingSettings:
+@dataclass
+class RegistryGroup:
+    """``tracking.registry``: register each configuration's champion after ``make pipeline``
+    as ``<prefix>.<configuration label>`` with ``alias``."""
+
+    enabled: bool = False
+    prefix: str = "tsm"
+    alias: str = "champion"
+
+
+@dataclass
+class TrackingGroup:
+    """The ``tracking`` config group (conf/tracking/): where MLflow logs."""
+
+    enabled: bool = True
+    uri: str | None = None
+    artifact_location: str | None = None
+    experiment: str = "tsm-hysteresis"
+    registry: RegistryGroup = field(default_factory=RegistryGroup)
+
+
+def tracking_group(tracking: Any) -> TrackingGroup:
+    """The ``tracking`` group (a mapping, None = every default) as typed settings."""
+    from pipelines import schemas
+
+    return schemas.settings(TrackingGroup, tracking or {})
+
+
+def settings_from_config(tracking: Any, *, root: str | Path) -> TrackingSettings:
     """Build :class:`TrackingSettings` from the ``tracking`` config group."""
+    group = tracking_group(tracking)
     return TrackingSettings(
-        enabled=bool(tracking.get("enabled", True)),
-        uri=tracking.get("uri") or None,
-        artifact_location=tracking.get("artifact_location") or None,
-        experiment=str(tracking.get("experiment", "tsm-hysteresis")),
+        enabled=group.enabled,
+        uri=group.uri or None,
+        artifact_location=group.artifact_location or None,
+        experiment=group.experiment,
         root=Path(root).resolve(),
     )
 
 
-def stage_tracker(cfg: Mapping[str, Any]) -> Tracker | None:
+@dataclass
+class _StageEdge:
+    """The two groups of a stage config a tracker is built from."""
+
+    paths: Any = None
+    tracking: Any = None
+
+
+@dataclass
+class _Root:
+    root: str = "."
+
+
+def stage_tracker(cfg: Any) -> Tracker | None:
     """The tracker for a stage's plain config (its ``tracking`` group and ``paths.root``), or
-    ``None`` when the config does not switch tracking on."""
-    tracking = dict(cfg.get("tracking") or {})
-    if not tracking.get("enabled", False):
+    ``None`` when the config does not switch tracking on. The stages built on
+    :class:`pipelines.skeleton.Stage` get theirs from :func:`pipelines.skeleton.tracker_for`."""
+    from pipelines import schemas
+
+    edge = schemas.settings(_StageEdge, cfg)
+    if not edge.tracking or not tracking_group(edge.tracking).enabled:
         return None
-    root = (cfg.get("paths") or {}).get("root", ".")
-    return Tracker(settings_from_config(tracking, root=root))
+    root = schemas.settings(_Root, edge.paths or {}).root
+    return Tracker(settings_from_config(edge.tracking, root=root))
 
 
 # --------------------------------------------------------------------------------------
@@ -765,9 +810,10 @@ class MlflowSweepCallback(_HydraCallback):
     def on_multirun_start(self, config: Any, **kwargs: Any) -> None:
         from omegaconf import OmegaConf
 
-        tracking = OmegaConf.to_container(config.get("tracking", {}), resolve=True) or {}
+        tracking = (OmegaConf.to_container(config.tracking, resolve=True)
+                    if "tracking" in config else {})
         root = config.paths.root if "paths" in config else "."
-        settings = settings_from_config(tracking, root=root)  # type: ignore[arg-type]
+        settings = settings_from_config(tracking, root=root)
         if not settings.enabled:
             return
         self._tracker = Tracker(settings)

@@ -25,11 +25,10 @@ import logging
 import time
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import hydra
 import numpy as np
 import pandas as pd
 
@@ -43,15 +42,13 @@ from pipelines import cache, schemas, stages
 from pipelines.common import (
     Paths,
     dataset_hash,
-    hydra_output_dir,
     hydra_sweep_dir,
     read_processed,
-    run_stage,
     stage_columns,
-    to_container,
 )
+from pipelines.skeleton import KeyFile, Stage, TrackContext
 from pipelines.stages import Configuration, PipelineError, RunSignal
-from rig_io.atomic import atomic_path, write_text_atomic
+from rig_io.atomic import atomic_path
 
 log = logging.getLogger(__name__)
 COLUMNS = ("family", "curve_angle_deg", "radius_mm", "predictor", "rmse")
@@ -253,90 +250,137 @@ def not_applicable(dataset: pd.DataFrame) -> str | None:
             f"and a radius, the data has {len(shaped)} ({names})")
 
 
-def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
+def run(settings: Any, *, dataset: pd.DataFrame | None = None,
         fits: pd.DataFrame | None = None) -> UnseenShapeResult:
-    """Hydra-free core: config in, :class:`UnseenShapeResult` out; writes under reports/."""
+    """Hydra-free core: settings (:class:`schemas.UnseenShapeConfig`, or a mapping of its
+    fields) in, :class:`UnseenShapeResult` out; writes under reports/."""
     from pipelines.artifacts import load_models
 
     start = time.perf_counter()
-    cfg = schemas.with_defaults(schemas.UnseenShapeConfig, cfg)
-    paths = Paths.from_config(cfg["paths"])
+    s = schemas.settings(schemas.UnseenShapeConfig, settings)
+    paths = Paths.from_config(s.paths)
     if dataset is None:
-        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
-    input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
-    stages.check_dataset(dataset, signals=(input_col, output_col))
-    sel = cfg["config"]
-    configs = stages.configurations(dataset, rig=sel["rig"],
-                                    curve_angle_deg=sel["curve_angle_deg"],
-                                    radius_mm=sel["radius_mm"])
+        dataset = read_processed(paths.processed, stage_columns(s.signals))
+    stages.check_dataset(dataset, signals=(s.signals.input, s.signals.output))
+    configs = _study_configurations(dataset, s.config)
+    models = _Models.select(load_models(paths.models) if fits is None else fits, configs, s)
+    runs, signals = _evaluation_runs(dataset, configs, s)
+    key = _content_key(s, models, runs)
+    reports = paths.reports
+    out_table = reports / "unseen_shape.parquet"
+    out_summary = reports / "unseen_shape_summary.csv"
+    plot = reports / "plots" / "unseen_shape.png"
+    keyfile = KeyFile(reports / KEY_FILE, enabled=s.cache, needs=(out_table,))
+    if keyfile.hit(key) is not None:
+        table = pd.read_parquet(out_table)
+        summary = summarise(table)
+        done = [p for p in (out_table, out_summary, plot) if p.exists()]
+        log.info("unseen_shape: up to date (%s)", key)
+        return UnseenShapeResult(table, summary, done, _best(summary), cached=True,
+                                 seconds=time.perf_counter() - start)
+
+    tasks = _family_tasks(models, configs, runs, signals, asdict(s.estimator))
+    table = _loo_table(tasks, n_jobs=1 if hydra_sweep_dir() is not None else s.n_jobs)
+    summary = summarise(table)
+    files: list[Path] = []
+    with atomic_path(out_table) as tmp:
+        table.to_parquet(tmp, index=False)
+    files.append(out_table)
+    with atomic_path(out_summary) as tmp:
+        summary.to_csv(tmp, index=False)
+    files.append(out_summary)
+    if s.plot and not table.empty:
+        files.append(figure(table, plot, dpi=s.dpi))
+    keyfile.store(key)
+    seconds = time.perf_counter() - start
+    best = _best(summary)
+    log.info("unseen_shape: %d families x %d configurations in %.1f s; best %s", len(tasks),
+             len(configs), seconds, best)
+    return UnseenShapeResult(table, summary, files, best, cached=False, seconds=seconds)
+
+
+def _study_configurations(dataset: pd.DataFrame, sel: schemas.ConfigurationSelection
+                          ) -> list[Configuration]:
+    """The selected configurations with a shape, of the rig with the most of them."""
+    configs = stages.configurations(dataset, rig=sel.rig, curve_angle_deg=sel.curve_angle_deg,
+                                    radius_mm=sel.radius_mm)
     configs = [c for c in configs if c.curve_angle_deg is not None and c.radius_mm is not None]
     if not configs:
         raise PipelineError("unseen_shape needs configurations with a curve angle and a radius")
     rigs = sorted({c.rig for c in configs}, key=lambda r: -sum(c.rig == r for c in configs))
-    configs = [c for c in configs if c.rig == rigs[0]]
-    fit_exc = str(cfg["fit_excitation"])
-    eval_kinds = list(cfg["eval_excitations"])
-    estimator = dict(cfg["estimator"])
-    if fits is None:
-        fits = load_models(paths.models)
-    ok = fits[(fits["fit_excitation"] == fit_exc) & fits["model_json"].notna()] \
-        if not fits.empty else fits
-    wanted = cfg["families"]
-    by_label = {c.label: c for c in configs}
-    per_family: dict[str, dict[str, str]] = {}
-    fit_rows: dict[str, dict[str, tuple[str, int]]] = {}
-    keys: list[str] = []
-    for rec in ok.to_dict("records"):
-        c = Configuration(str(rec["rig"]), stages._num(rec["curve_angle_deg"]),
-                          stages._num(rec["radius_mm"]))
-        if c.label not in by_label or (wanted and rec["family"] not in wanted):
-            continue
-        per_family.setdefault(str(rec["family"]), {})[c.label] = str(rec["model_json"])
-        fit_rows.setdefault(str(rec["family"]), {})[c.label] = (
-            str(rec.get("fit_run_ids") or ""), int(rec.get("n_samples") or 0))
-        keys.append(str(rec["key"]))
+    return [c for c in configs if c.rig == rigs[0]]
 
+
+@dataclass
+class _Models:
+    """The fit stage's models the study uses, per family and configuration label."""
+
+    #: family -> label -> model JSON
+    json: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: family -> label -> (identification run ids, samples identified on)
+    fit_rows: dict[str, dict[str, tuple[str, int]]] = field(default_factory=dict)
+    keys: list[str] = field(default_factory=list)
+
+    @classmethod
+    def select(cls, fits: pd.DataFrame, configs: Sequence[Configuration],
+               s: schemas.UnseenShapeConfig) -> _Models:
+        ok = fits[(fits["fit_excitation"] == s.fit_excitation) & fits["model_json"].notna()] \
+            if not fits.empty else fits
+        labels = {c.label for c in configs}
+        out = cls()
+        for rec in ok.to_dict("records"):
+            c = Configuration(str(rec["rig"]), stages._num(rec["curve_angle_deg"]),
+                              stages._num(rec["radius_mm"]))
+            if c.label not in labels or (s.families and rec["family"] not in s.families):
+                continue
+            fam = str(rec["family"])
+            out.json.setdefault(fam, {})[c.label] = str(rec["model_json"])
+            out.fit_rows.setdefault(fam, {})[c.label] = (
+                str(rec.get("fit_run_ids") or ""), int(rec.get("n_samples") or 0))
+            out.keys.append(str(rec["key"]))
+        return out
+
+
+def _evaluation_runs(dataset: pd.DataFrame, configs: Sequence[Configuration],
+                     s: schemas.UnseenShapeConfig
+                     ) -> tuple[dict[str, list[RunSignal]], dict[str, dict[str, list[RunSignal]]]]:
+    """Per configuration label: the runs scored, and every run by excitation kind."""
     runs: dict[str, list[RunSignal]] = {}
     signals: dict[str, dict[str, list[RunSignal]]] = {}
     located = stages.ConfigurationRows(dataset)
     for c in configs:
-        by_kind = stages.run_signals(located.rows(c), input_col=input_col,
-                                     output_col=output_col)
+        by_kind = stages.run_signals(located.rows(c), input_col=s.signals.input,
+                                     output_col=s.signals.output)
         signals[c.label] = by_kind
-        kinds = eval_kinds or sorted(k for k in by_kind if k != fit_exc)
+        kinds = list(s.eval_excitations) or sorted(k for k in by_kind if k != s.fit_excitation)
         runs[c.label] = [r for k in kinds for r in by_kind.get(k, [])]
-    settings = {"fit_excitation": fit_exc, "eval_excitations": eval_kinds,
-                "estimator": estimator, "families": wanted,
-                "signals": [input_col, output_col]}
-    key = cache.combine({
-        "stage": "unseen_shape", "models": sorted(keys), "settings": settings,
+    return runs, signals
+
+
+def _content_key(s: schemas.UnseenShapeConfig, models: _Models,
+                 runs: Mapping[str, Sequence[RunSignal]]) -> str:
+    """What the study's outputs are made from: models, settings, data and code."""
+    keyed = {"fit_excitation": s.fit_excitation, "eval_excitations": list(s.eval_excitations),
+             "estimator": asdict(s.estimator), "families": s.families,
+             "signals": [s.signals.input, s.signals.output]}
+    return cache.combine({
+        "stage": "unseen_shape", "models": sorted(models.keys), "settings": keyed,
         "data": sorted(r.data_hash for rs in runs.values() for r in rs),
         # the refits on a common structure run the families' own code
         "code": [cache.hash_files([Path(__file__),
                                    *cache.code_files("hysteresis.shape_aware").values()]),
                  *(cache.hash_files(cache.code_files(family_class(f).__module__).values())
-                   for f in sorted(per_family))],
+                   for f in sorted(models.json))],
     })
-    reports = paths.reports
-    out_table = reports / "unseen_shape.parquet"
-    out_summary = reports / "unseen_shape_summary.csv"
-    plot = reports / "plots" / "unseen_shape.png"
-    key_file = reports / KEY_FILE
-    if cfg["cache"] and key_file.exists() and out_table.exists():
-        try:
-            record = json.loads(key_file.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError):
-            record = {}
-        if record.get("key") == key:
-            table = pd.read_parquet(out_table)
-            summary = summarise(table)
-            done = [p for p in (out_table, out_summary, plot) if p.exists()]
-            log.info("unseen_shape: up to date (%s)", key)
-            return UnseenShapeResult(table, summary, done, _best(summary), cached=True,
-                                     seconds=time.perf_counter() - start)
 
+
+def _family_tasks(models: _Models, configs: Sequence[Configuration],
+                  runs: Mapping[str, list[RunSignal]],
+                  signals: Mapping[str, Mapping[str, Sequence[RunSignal]]],
+                  estimator: dict[str, Any]) -> list[tuple[Any, ...]]:
+    """One leave-one-out task per family with at least 3 configurations to learn from."""
     tasks = []
-    for fam, labelled in sorted(per_family.items()):
+    for fam, labelled in sorted(models.json.items()):
         have = [c for c in configs if c.label in labelled and runs[c.label]]
         if len(have) < 3:
             log.warning("unseen_shape: %s has %d configuration(s) with a model and evaluation "
@@ -344,9 +388,13 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
             continue
         tasks.append((fam, have, [labelled[c.label] for c in have],
                       {c.label: runs[c.label] for c in have}, estimator,
-                      [identification_record(signals[c.label], *fit_rows[fam][c.label])
+                      [identification_record(signals[c.label], *models.fit_rows[fam][c.label])
                        for c in have]))
-    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg["n_jobs"])
+    return tasks
+
+
+def _loo_table(tasks: Sequence[tuple[Any, ...]], *, n_jobs: int) -> pd.DataFrame:
+    """The tasks' rows (:data:`COLUMNS`), typed and sorted."""
     if n_jobs > 1 and len(tasks) > 1:
         from joblib import Parallel, delayed
 
@@ -361,24 +409,8 @@ def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
     table["predictor"] = table["predictor"].astype("string")
     for col in ("curve_angle_deg", "radius_mm", "rmse"):
         table[col] = table[col].astype("float64")
-    table = table.sort_values(["family", "curve_angle_deg", "radius_mm", "predictor"],
-                              kind="stable").reset_index(drop=True)
-    summary = summarise(table)
-    files: list[Path] = []
-    with atomic_path(out_table) as tmp:
-        table.to_parquet(tmp, index=False)
-    files.append(out_table)
-    with atomic_path(out_summary) as tmp:
-        summary.to_csv(tmp, index=False)
-    files.append(out_summary)
-    if cfg["plot"] and not table.empty:
-        files.append(figure(table, plot, dpi=int(cfg["dpi"])))
-    write_text_atomic(key_file, json.dumps({"key": key}, indent=1))
-    seconds = time.perf_counter() - start
-    best = _best(summary)
-    log.info("unseen_shape: %d families x %d configurations in %.1f s; best %s", len(tasks),
-             len(configs), seconds, best)
-    return UnseenShapeResult(table, summary, files, best, cached=False, seconds=seconds)
+    return table.sort_values(["family", "curve_angle_deg", "radius_mm", "predictor"],
+                             kind="stable").reset_index(drop=True)
 
 
 def _best(summary: pd.DataFrame) -> str | None:
@@ -425,43 +457,25 @@ def log_result(tracker: Any, run_id: str, result: UnseenShapeResult) -> None:
         tracker.log_artifact(run_id, f, "unseen_shape")
 
 
-def main_cfg(cfg: Any) -> UnseenShapeResult:
-    """What ``python -m pipelines.unseen_shape`` does with its composed config (also MLflow)."""
-    from pipelines import tracking
+def _track(ctx: TrackContext, s: schemas.UnseenShapeConfig,
+           result: UnseenShapeResult) -> None:
+    """The stage's parent run: its settings, the study's numbers and files, its input."""
+    from pipelines import lineage, tracking
 
-    started = time.time()  # its own parent run spans the work, not only the logging
-    plain = to_container(cfg)
-    paths = Paths.from_config(plain["paths"])
-    result = run(plain)
-    tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
-                                                             root=paths.root))
-    if tracker.enabled:
-        with tracking.StageRun(tracker, "unseen_shape", sweep_dir=hydra_sweep_dir(),
-                                start_time=started) as stage:
-            assert stage.parent_id is not None
-            tracker.log(stage.parent_id,
-                        params=tracking.flatten({k: v for k, v in plain.items()
-                                                 if k != "tracking"}),
+    paths = ctx.paths
+    with ctx.parent_run() as parent:
+        params = {k: v for k, v in asdict(s).items() if k != "tracking"}
+        ctx.tracker.log(parent, params=tracking.flatten(params),
                         tags={"dataset_hash": dataset_hash(paths.processed)})
-            log_result(tracker, stage.parent_id, result)
-            if paths.processed.is_dir():  # the study reads every run of the dataset
-                from pipelines import lineage
-
-                lineage.log_input(tracker, [stage.parent_id], lineage.processed_input(
-                    paths.processed, context="evaluation"))
-            hydra_dir = hydra_output_dir()
-            if hydra_dir is not None:
-                tracker.log_artifact(stage.parent_id, hydra_dir / ".hydra", ".hydra")
-    return result
+        log_result(ctx.tracker, parent, result)
+        if paths.processed.is_dir():  # the study reads every run of the dataset
+            lineage.log_input(ctx.tracker, [parent], lineage.processed_input(
+                paths.processed, context="evaluation"))
+        ctx.log_hydra(parent)
 
 
-@hydra.main(config_path="../conf", config_name="unseen_shape", version_base="1.3")
-def main(cfg: Any) -> None:
-    run_stage("unseen_shape", lambda: main_cfg(cfg))
+STAGE = Stage("unseen_shape", schemas.UnseenShapeConfig, run=run, track=_track)
 
 
 if __name__ == "__main__":
-    from pipelines.cli import guard
-
-    guard("unseen_shape")
-    main()
+    STAGE.main()

@@ -16,10 +16,10 @@ import json
 import logging
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-import hydra
 import pandas as pd
 import pyarrow as pa
 
@@ -33,14 +33,12 @@ from pipelines.artifacts import (
 from pipelines.common import (
     Paths,
     dataset_hash,
-    hydra_output_dir,
     hydra_sweep_dir,
     identification_plan,
     read_processed,
-    run_stage,
     stage_columns,
-    to_container,
 )
+from pipelines.skeleton import Stage, TrackContext
 from pipelines.stages import Configuration, RunSignal
 from rig_io.atomic import atomic_path, clean_leftovers, write_text_atomic
 
@@ -82,85 +80,100 @@ def select_fits(fits: pd.DataFrame, configs: Sequence[Configuration],
     return out.reset_index(drop=True)
 
 
-def run(cfg: Mapping[str, Any], *, dataset: pd.DataFrame | None = None,
+def run(settings: Any, *, dataset: pd.DataFrame | None = None,
         fits: pd.DataFrame | None = None) -> tuple[pd.DataFrame, list[str]]:
-    """Hydra-free core: config in, (metrics table, error messages) out; writes the files.
+    """Hydra-free core: settings (:class:`schemas.ValidateConfig`, or a mapping of its
+    fields) in, (metrics table, error messages) out; writes the files.
 
     ``fits`` defaults to every model file under ``${paths.models}`` in the selection.
     """
-    cfg = schemas.with_defaults(schemas.ValidateConfig, cfg)
-    paths = Paths.from_config(cfg["paths"])
+    s = schemas.settings(schemas.ValidateConfig, settings)
+    paths = Paths.from_config(s.paths)
     clean_leftovers(paths.predictions)  # temporaries of a killed validate
     clean_leftovers(paths.reports, recursive=False)
     if dataset is None:
-        dataset = read_processed(paths.processed, stage_columns(cfg["signals"]))
-    plan = identification_plan(cfg, dataset, paths)
+        dataset = read_processed(paths.processed, stage_columns(s.signals))
+    plan = identification_plan(s, dataset, paths)
     dataset = plan.dataset
-    input_col, output_col = str(cfg["signals"]["input"]), str(cfg["signals"]["output"])
-    stages.check_dataset(dataset, signals=(input_col, output_col))
-    sel = cfg["config"]
-    configs = stages.configurations(dataset, rig=sel["rig"],
-                                    curve_angle_deg=sel["curve_angle_deg"],
-                                    radius_mm=sel["radius_mm"])
-    fit_excitations = list(plan.fit_excitations)
-    if fits is None:
-        fits = load_models(paths.models)
-    fits = select_fits(fits, configs, fit_excitations)
+    stages.check_dataset(dataset, signals=(s.signals.input, s.signals.output))
+    configs = stages.configurations(dataset, rig=s.config.rig,
+                                    curve_angle_deg=s.config.curve_angle_deg,
+                                    radius_mm=s.config.radius_mm)
+    fits = select_fits(load_models(paths.models) if fits is None else fits, configs,
+                       list(plan.fit_excitations))
     if fits.empty:
         raise stages.PipelineError(
             f"no fitted model for the selected configurations and fit excitations "
-            f"{fit_excitations} under {paths.models}; run `make fit` first"
+            f"{list(plan.fit_excitations)} under {paths.models}; run `make fit` first"
         )
     heldout = list(plan.heldout)
-    cross = bool(cfg["cross"])
-    settings = {"heldout": heldout, "cross": cross, "signals": [input_col, output_col]}
-    use_cache = bool(cfg["cache"])
-
     start = time.perf_counter()
-    done: list[pd.DataFrame] = []
-    done_runs: list[pd.DataFrame] = []
-    errors: list[str] = []
-    todo: list[tuple[pd.DataFrame, dict[str, list[RunSignal]], str, Path, Configuration]] = []
-    by_label = {c.label: c for c in configs}
-    located = stages.ConfigurationRows(dataset)
-    for label, group in fits.groupby(
-        fits.apply(lambda r: Configuration(str(r["rig"]), stages._num(r["curve_angle_deg"]),
-                                           stages._num(r["radius_mm"])).label, axis=1),
-        sort=True,
-    ):
-        config = by_label[str(label)]
-        signals = stages.run_signals(located.rows(config), input_col=input_col,
-                                     output_col=output_col)
-        key = stages.validation_key(group, signals, settings)
-        path = prediction_path(paths.predictions, config)
-        meta = read_prediction_meta(path) if use_cache and path.exists() else None
-        if meta is not None and meta.get("key") == key and "run_metrics" in meta:
-            done.append(stages.metrics_frame(meta["metrics"]))
-            done_runs.append(stages.run_metrics_frame(meta["run_metrics"]))
-            errors.extend(meta.get("errors", []))
-        else:
-            todo.append((group, signals, key, path, config))
-    n_jobs = 1 if hydra_sweep_dir() is not None else int(cfg["n_jobs"])
-    results = _run_tasks(todo, heldout=heldout, cross=cross, n_jobs=n_jobs,
-                         progress=bool(cfg["progress"]))
-    for metrics, by_run, errs in results:
-        done.append(metrics)
-        done_runs.append(by_run)
-        errors.extend(errs)
-    metrics = stages.sort_metrics(pd.concat(done, ignore_index=True)) if done else \
-        stages.metrics_frame([])
-    metrics = stages.metrics_frame(metrics.to_dict("records"))
-    write_metrics(metrics, paths)
-    runs_table = stages.run_metrics_frame(
-        pd.concat(done_runs, ignore_index=True).to_dict("records") if done_runs else [])
-    write_table(runs_table, paths.reports / "metrics_by_run")
-    _warn_if_nothing_held_out(metrics, heldout)
-    write_text_atomic(paths.reports / "validate_errors.json", json.dumps(errors, indent=1))
+    done, todo = _cached_configurations(s, fits, configs, dataset, heldout, paths)
+    n_jobs = 1 if hydra_sweep_dir() is not None else s.n_jobs
+    done += _run_tasks(todo, heldout=heldout, cross=s.cross, n_jobs=n_jobs,
+                       progress=s.progress)
+    metrics = _write_outputs(done, paths, heldout)
+    errors = [e for _, _, errs in done for e in errs]
     log.info("validate: %d configurations (%d recomputed), %d metric rows in %.1f s",
              len(done), len(todo), len(metrics), time.perf_counter() - start)
     for e in errors:
         log.warning("validate: %s", e)
     return metrics, errors
+
+
+_Task = tuple[pd.DataFrame, dict[str, list[RunSignal]], str, Path, Configuration]
+_Done = tuple[pd.DataFrame, pd.DataFrame, list[str]]
+
+
+def _config_label(row: Mapping[str, Any]) -> str:
+    return Configuration(str(row["rig"]), stages._num(row["curve_angle_deg"]),
+                         stages._num(row["radius_mm"])).label
+
+
+def _cached_configurations(s: schemas.ValidateConfig, fits: pd.DataFrame,
+                           configs: Sequence[Configuration], dataset: pd.DataFrame,
+                           heldout: list[str], paths: Paths
+                           ) -> tuple[list[_Done], list[_Task]]:
+    """Each configuration's results read back from its predictions file where its key (the
+    models, the runs and the settings) is unchanged, else a task to compute them."""
+    keyed = {"heldout": heldout, "cross": s.cross,
+             "signals": [s.signals.input, s.signals.output]}
+    done: list[_Done] = []
+    todo: list[_Task] = []
+    by_label = {c.label: c for c in configs}
+    located = stages.ConfigurationRows(dataset)
+    for label, group in fits.groupby(fits.apply(_config_label, axis=1), sort=True):
+        config = by_label[str(label)]
+        signals = stages.run_signals(located.rows(config), input_col=s.signals.input,
+                                     output_col=s.signals.output)
+        key = stages.validation_key(group, signals, keyed)
+        path = prediction_path(paths.predictions, config)
+        meta = read_prediction_meta(path) if s.cache and path.exists() else None
+        if meta is not None and meta.get("key") == key and "run_metrics" in meta:
+            done.append((stages.metrics_frame(meta["metrics"]),
+                         stages.run_metrics_frame(meta["run_metrics"]),
+                         list(meta.get("errors", []))))
+        else:
+            todo.append((group, signals, key, path, config))
+    return done, todo
+
+
+def _write_outputs(done: Sequence[_Done], paths: Paths, heldout: Sequence[str]
+                   ) -> pd.DataFrame:
+    """metrics, metrics_by_run and validate_errors.json from every configuration's results."""
+    frames = [m for m, _, _ in done]
+    metrics = stages.sort_metrics(pd.concat(frames, ignore_index=True)) if frames else \
+        stages.metrics_frame([])
+    metrics = stages.metrics_frame(metrics.to_dict("records"))
+    write_metrics(metrics, paths)
+    by_run = [r for _, r, _ in done]
+    runs_table = stages.run_metrics_frame(
+        pd.concat(by_run, ignore_index=True).to_dict("records") if by_run else [])
+    write_table(runs_table, paths.reports / "metrics_by_run")
+    _warn_if_nothing_held_out(metrics, heldout)
+    errors = [e for _, _, errs in done for e in errs]
+    write_text_atomic(paths.reports / "validate_errors.json", json.dumps(errors, indent=1))
+    return metrics
 
 
 def _warn_if_nothing_held_out(metrics: pd.DataFrame, heldout: Sequence[str]) -> None:
@@ -225,45 +238,25 @@ def write_table(table: pd.DataFrame, stem: Path) -> None:
         table.to_csv(tmp, index=False)
 
 
-def main_cfg(cfg: Any) -> pd.DataFrame:
-    """What ``python -m pipelines.validate`` does with its composed config (also MLflow)."""
-    from pipelines import tracking
+def _track(ctx: TrackContext, s: schemas.ValidateConfig,
+           result: tuple[pd.DataFrame, list[str]]) -> None:
+    """The stage's parent run: its settings, inputs, metrics table and config."""
+    from pipelines import lineage, tracking
 
-    started = time.time()  # its own parent run spans the work, not only the logging
-    plain = to_container(cfg)
-    paths = Paths.from_config(plain["paths"])
-    tracker = tracking.Tracker(tracking.settings_from_config(plain["tracking"],
-                                                             root=paths.root))
-    if tracker.enabled:
-        tracker.init_store()  # a locked or damaged store stops the stage before the work
-    metrics, errors = run(plain)
-    if tracker.enabled:
-        with tracking.StageRun(tracker, "validate", sweep_dir=hydra_sweep_dir(),
-                                start_time=started) as stage_run:
-            assert stage_run.parent_id is not None
-            tracker.log(stage_run.parent_id,
-                        params=tracking.flatten({k: v for k, v in plain.items()
-                                                 if k != "tracking"}),
+    metrics, _ = result
+    paths = ctx.paths
+    with ctx.parent_run() as parent:
+        params = {k: v for k, v in asdict(s).items() if k != "tracking"}
+        ctx.tracker.log(parent, params=tracking.flatten(params),
                         tags={"dataset_hash": dataset_hash(paths.processed)})
-            from pipelines import lineage
-
-            lineage.log_stage_inputs(tracker, stage_run.parent_id, metrics,
-                                     processed=paths.processed)
-            tracker.log_table(stage_run.parent_id, metrics, "metrics.json")
-            tracker.log_artifact(stage_run.parent_id, paths.metrics_csv, "tables")
-            hydra_dir = hydra_output_dir()
-            if hydra_dir is not None:
-                tracker.log_artifact(stage_run.parent_id, hydra_dir / ".hydra", ".hydra")
-    return metrics
+        lineage.log_stage_inputs(ctx.tracker, parent, metrics, processed=paths.processed)
+        ctx.tracker.log_table(parent, metrics, "metrics.json")
+        ctx.tracker.log_artifact(parent, paths.metrics_csv, "tables")
+        ctx.log_hydra(parent)
 
 
-@hydra.main(config_path="../conf", config_name="validate", version_base="1.3")
-def main(cfg: Any) -> None:
-    run_stage("validate", lambda: main_cfg(cfg))
+STAGE = Stage("validate", schemas.ValidateConfig, run=run, track=_track)
 
 
 if __name__ == "__main__":
-    from pipelines.cli import guard
-
-    guard("validate")
-    main()
+    STAGE.main()
