@@ -35,12 +35,6 @@ from typing import Any
 import pandas as pd
 
 from pipelines import cache, schemas
-from pipelines import fit as fit_core
-from pipelines import generate as generate_core
-from pipelines import ingest as ingest_core
-from pipelines import report as report_core
-from pipelines import unseen_shape as unseen_core
-from pipelines import validate as validate_core
 from pipelines.common import (
     CONF_DIR,
     REPO_ROOT,
@@ -51,6 +45,12 @@ from pipelines.common import (
     read_processed,
     stage_columns,
 )
+from pipelines.core import fit as fit_core
+from pipelines.core import generate as generate_core
+from pipelines.core import ingest as ingest_core
+from pipelines.core import report as report_core
+from pipelines.core import unseen_shape as unseen_core
+from pipelines.core import validate as validate_core
 from pipelines.skeleton import Stage, tracker_for
 from pipelines.stages import PipelineError
 from pipelines.tracking import tracking_group

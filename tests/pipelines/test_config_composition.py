@@ -9,8 +9,8 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from pipelines import fit as fit_stage
 from pipelines.common import CONF_DIR, Paths, to_container
+from pipelines.core import fit as fit_stage
 from pipelines.run_all import EXTERNAL_STAGES, OWN_STAGES, stage_config
 
 STAGES = ("fit", "validate", "report", "pipeline")
