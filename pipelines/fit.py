@@ -14,8 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import dataclass
 
 import pandas as pd
 
@@ -59,7 +58,7 @@ def _track(ctx: TrackContext, s: schemas.FitConfig, out: FitOutcome) -> None:
         return
     paths = ctx.paths
     with ctx.parent_run() as parent:
-        base = tracking.flatten(_loggable(s, "family", "family_overrides", "tracking"))
+        base = ctx.params(s, "family", "family_overrides")
         plan = identification_plan(s, out.dataset, paths)
         if plan.notes:
             ctx.tracker.log_text(parent, json.dumps(dict(plan.notes), indent=1),
@@ -74,11 +73,6 @@ def _track(ctx: TrackContext, s: schemas.FitConfig, out: FitOutcome) -> None:
         )
         lineage.log_model_inputs(ctx.tracker, ids, fresh, None, processed=paths.processed,
                                  dataset=out.dataset)
-
-
-def _loggable(s: Any, *leave_out: str) -> dict[str, Any]:
-    """The settings as MLflow params: every field but ``leave_out``."""
-    return {k: v for k, v in asdict(s).items() if k not in leave_out}
 
 
 STAGE = Stage("fit", schemas.FitConfig, run=_run_command, track=_track)

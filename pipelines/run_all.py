@@ -51,7 +51,7 @@ from pipelines.core import ingest as ingest_core
 from pipelines.core import report as report_core
 from pipelines.core import unseen_shape as unseen_core
 from pipelines.core import validate as validate_core
-from pipelines.skeleton import Stage, tracker_for
+from pipelines.skeleton import Stage, TrackContext, tracker_for
 from pipelines.stages import PipelineError
 from pipelines.tracking import tracking_group
 from rig_io.atomic import write_text_atomic
@@ -468,9 +468,7 @@ def _track_start(tracker: Any, p: schemas.PipelineConfig, fit_settings: Any,
     units = dataset_units(paths.processed)
     hydra_dir = hydra_output_dir()
     if fits is not None:
-        base = tracking.flatten({k: v for k, v in asdict(fit_settings).items()
-                                 if k not in ("family", "family_overrides", "tracking",
-                                              "families")})
+        base = TrackContext.params(fit_settings, "family", "family_overrides", "families")
         ids = tracking.log_model_runs(
             tracker, parent, fits=fits, metrics=metrics, base_params=base, tags=tags,
             hydra_dir=hydra_dir / ".hydra" if hydra_dir else None, plots=None,

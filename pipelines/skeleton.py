@@ -29,10 +29,11 @@ cores with settings it derives from its own (:mod:`pipelines.run_all`).
 from __future__ import annotations
 
 import json
+import sys
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
@@ -72,6 +73,14 @@ class TrackContext:
                                 tags=tags or None, start_time=self.started) as stage_run:
             assert stage_run.parent_id is not None
             yield stage_run.parent_id
+
+    @staticmethod
+    def params(settings: Any, *leave_out: str) -> dict[str, str]:
+        """The settings as MLflow params (flattened), without ``tracking`` and ``leave_out``."""
+        from pipelines import tracking
+
+        skip = {"tracking", *leave_out}
+        return tracking.flatten({k: v for k, v in asdict(settings).items() if k not in skip})
 
     def log_hydra(self, run_id: str) -> None:
         """The composed config Hydra saved (``.hydra/``) onto ``run_id``, when under Hydra."""
@@ -120,12 +129,15 @@ class Stage(Generic[S, R]):
 
         guard(self.config_name)
 
-        @hydra.main(config_path=str(CONF_DIR), config_name=self.config_name,
-                    version_base="1.3")
         def entry(cfg: Any) -> None:
             run_stage(self.name, lambda: self.execute(cfg), self.errors)
 
-        entry()
+        # Hydra names the job (its log file, a sweep's parent run) after the task
+        # function's module: the command's (``pipelines.fit`` -> ``fit``), not this one
+        spec = getattr(sys.modules["__main__"], "__spec__", None)
+        entry.__module__ = spec.name if spec is not None else f"pipelines.{self.name}"
+        hydra.main(config_path=str(CONF_DIR), config_name=self.config_name,
+                   version_base="1.3")(entry)()
 
 
 class KeyFile:

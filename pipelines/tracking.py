@@ -633,15 +633,9 @@ def log_model_runs(
     import json
     import tempfile
 
-    from mlflow.utils.mlflow_tags import MLFLOW_LOGGED_ARTIFACTS
-
     from pipelines.stages import Configuration
 
-    by_model: dict[tuple[Any, ...], pd.DataFrame] = {}
-    if metrics is not None and not metrics.empty:
-        keys = ["family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation"]
-        for key, group in metrics.groupby(keys, dropna=False, observed=True, sort=False):
-            by_model[_model_key(*key)] = group.reset_index(drop=True)
+    by_model = _metrics_by_model(metrics)
     ids: list[str] = []
     several_rigs = fits["rig"].nunique() > 1 if len(fits) else False
     several_excitations = fits["fit_excitation"].nunique() > 1 if len(fits) else False
@@ -667,26 +661,8 @@ def log_model_runs(
                 "fit_excitation": fit["fit_excitation"], "fit_run_ids": fit["fit_run_ids"],
                 "model_key": fit["key"], "status": "failed" if failed else "ok",
             }
-            if mine is not None:
-                _jsonable(mine).to_json(staged / "metrics.json", orient="split", index=False,
-                                        date_format="iso")
-                run_tags[MLFLOW_LOGGED_ARTIFACTS] = json.dumps(
-                    [{"path": "metrics.json", "type": "table"}])
-            if _present(fit.get("model_json")):
-                (staged / "model").mkdir()
-                (staged / "model" / "model.json").write_text(str(fit["model_json"]))
-            if failed:
-                (staged / "error.txt").write_text(str(fit["error"]))
             figures = [Path(p) for p in (plots or {}).get(config.label, ()) if Path(p).exists()]
-            if figures:
-                (staged / "plots").mkdir()
-                for fig in figures:  # symlinks: the upload copies the real file once
-                    (staged / "plots" / fig.name).symlink_to(fig.resolve())
-            if hydra_dir is not None and hydra_dir.is_dir():
-                (staged / ".hydra").mkdir()
-                for f in hydra_dir.iterdir():
-                    if f.is_file():
-                        (staged / ".hydra" / f.name).symlink_to(f.resolve())
+            run_tags |= _stage_artifacts(staged, fit, mine, figures, hydra_dir)
 
             name = model_run_name(str(fit["family"]), config, str(fit["fit_excitation"]),
                                   rig=several_rigs, excitation=several_excitations)
@@ -707,6 +683,47 @@ def log_model_runs(
             tracker.end_run(run_id, status="FAILED" if failed else "FINISHED")
             ids.append(run_id)
     return ids
+
+
+def _metrics_by_model(metrics: pd.DataFrame | None) -> dict[tuple[Any, ...], pd.DataFrame]:
+    """Each model's rows of the metrics table (:func:`_model_key`)."""
+    by_model: dict[tuple[Any, ...], pd.DataFrame] = {}
+    if metrics is not None and not metrics.empty:
+        keys = ["family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation"]
+        for key, group in metrics.groupby(keys, dropna=False, observed=True, sort=False):
+            by_model[_model_key(*key)] = group.reset_index(drop=True)
+    return by_model
+
+
+def _stage_artifacts(staged: Path, fit: Mapping[str, Any], mine: pd.DataFrame | None,
+                     figures: Iterable[Path], hydra_dir: Path | None) -> dict[str, Any]:
+    """A model run's files in ``staged`` (uploaded in one call): its metrics table, model,
+    error, figures and ``.hydra``; the tags saying what was logged."""
+    import json
+
+    from mlflow.utils.mlflow_tags import MLFLOW_LOGGED_ARTIFACTS
+
+    tags: dict[str, Any] = {}
+    if mine is not None:
+        _jsonable(mine).to_json(staged / "metrics.json", orient="split", index=False,
+                                date_format="iso")
+        tags[MLFLOW_LOGGED_ARTIFACTS] = json.dumps([{"path": "metrics.json", "type": "table"}])
+    if _present(fit.get("model_json")):
+        (staged / "model").mkdir()
+        (staged / "model" / "model.json").write_text(str(fit["model_json"]))
+    if _present(fit.get("error")):
+        (staged / "error.txt").write_text(str(fit["error"]))
+    figures = list(figures)
+    if figures:
+        (staged / "plots").mkdir()
+        for fig in figures:  # symlinks: the upload copies the real file once
+            (staged / "plots" / fig.name).symlink_to(fig.resolve())
+    if hydra_dir is not None and hydra_dir.is_dir():
+        (staged / ".hydra").mkdir()
+        for f in hydra_dir.iterdir():
+            if f.is_file():
+                (staged / ".hydra" / f.name).symlink_to(f.resolve())
+    return tags
 
 
 def shape_text(config: Any) -> str:

@@ -20,8 +20,6 @@ files and the processed dataset. Nothing is recomputed when its inputs are uncha
 
 from __future__ import annotations
 
-from dataclasses import asdict
-
 from pipelines import schemas
 from pipelines.common import dataset_hash
 from pipelines.core.unseen_shape import UnseenShapeResult, log_result, run
@@ -31,12 +29,11 @@ from pipelines.skeleton import Stage, TrackContext
 def _track(ctx: TrackContext, s: schemas.UnseenShapeConfig,
            result: UnseenShapeResult) -> None:
     """The stage's parent run: its settings, the study's numbers and files, its input."""
-    from pipelines import lineage, tracking
+    from pipelines import lineage
 
     paths = ctx.paths
     with ctx.parent_run() as parent:
-        params = {k: v for k, v in asdict(s).items() if k != "tracking"}
-        ctx.tracker.log(parent, params=tracking.flatten(params),
+        ctx.tracker.log(parent, params=ctx.params(s),
                         tags={"dataset_hash": dataset_hash(paths.processed)})
         log_result(ctx.tracker, parent, result)
         if paths.processed.is_dir():  # the study reads every run of the dataset

@@ -12,8 +12,6 @@ models and data are unchanged is read back from its predictions file instead of 
 
 from __future__ import annotations
 
-from dataclasses import asdict
-
 import pandas as pd
 
 from pipelines import schemas
@@ -25,13 +23,12 @@ from pipelines.skeleton import Stage, TrackContext
 def _track(ctx: TrackContext, s: schemas.ValidateConfig,
            result: tuple[pd.DataFrame, list[str]]) -> None:
     """The stage's parent run: its settings, inputs, metrics table and config."""
-    from pipelines import lineage, tracking
+    from pipelines import lineage
 
     metrics, _ = result
     paths = ctx.paths
     with ctx.parent_run() as parent:
-        params = {k: v for k, v in asdict(s).items() if k != "tracking"}
-        ctx.tracker.log(parent, params=tracking.flatten(params),
+        ctx.tracker.log(parent, params=ctx.params(s),
                         tags={"dataset_hash": dataset_hash(paths.processed)})
         lineage.log_stage_inputs(ctx.tracker, parent, metrics, processed=paths.processed)
         ctx.tracker.log_table(parent, metrics, "metrics.json")

@@ -111,6 +111,43 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
                  compress: bool = False, n_jobs: int = 2, overwrite: bool = False,
                  progress: bool = True) -> dict[str, Any]:
     """Write every spec's run under ``out``; return a small report (also in campaign.json)."""
+    _check_request(specs, fmt, compress)
+    out = Path(os.path.abspath(out))  # not resolved: an output link is refused, not followed
+    out.mkdir(parents=True, exist_ok=True)
+    clean_leftovers(out, recursive=False)
+    book_path = out / CAMPAIGN_FILE
+    book = _read_book(book_path)
+    known: dict[str, Any] = dict(book.get("runs", {}))
+    todo, skipped = _plan(specs, out, fmt, known, overwrite=overwrite)
+    for spec in todo:
+        rid = spec["run_id"]
+        known[rid] = _book_entry(spec, fmt, target_path(out, rid, fmt).name, status="pending")
+    if todo or known != book.get("runs", {}):
+        _write_book(book_path, known)
+    t0 = time.perf_counter()
+    results: list[dict[str, Any]] = []
+    bar = tqdm(total=len(todo), desc="generate", unit="run", disable=not progress,
+               file=sys.stderr)
+    by_id = {s["run_id"]: s for s in specs}
+    for res in _written(todo, out, fmt, compress, n_jobs=n_jobs):
+        results.append(res)
+        rid = res["run_id"]
+        known[rid] = _book_entry(by_id[rid], fmt, Path(res["path"]).name, status="done")
+        _write_book(book_path, known)
+        bar.update(1)
+    bar.close()
+    elapsed = time.perf_counter() - t0
+    if not book_path.is_file():
+        _write_book(book_path, known)
+    return {"out": str(out), "format": fmt, "written": sorted(r["run_id"] for r in results),
+            "skipped": skipped, "seconds": elapsed,
+            "simulate_s": sum(r["simulate_s"] for r in results),
+            "write_s": sum(r["write_s"] for r in results),
+            "cpu_s": sum(r["simulate_cpu_s"] + r["write_cpu_s"] for r in results)}
+
+
+def _check_request(specs: list[dict[str, Any]], fmt: str, compress: bool) -> None:
+    """A known format, compression only for run folders, every run id once."""
     if fmt not in FORMATS:
         raise GenerateError(f"format must be one of {FORMATS}, got {fmt!r}")
     if compress and fmt != "folder":
@@ -119,18 +156,24 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
     dup = sorted({i for i in ids if ids.count(i) > 1})
     if dup:
         raise GenerateError(f"run ids repeat in the campaign: {dup[:5]}")
-    out = Path(os.path.abspath(out))  # not resolved: an output link is refused, not followed
-    out.mkdir(parents=True, exist_ok=True)
-    clean_leftovers(out, recursive=False)
-    book_path = out / CAMPAIGN_FILE
-    book: dict[str, Any] = {}
-    if book_path.is_file():
-        try:
-            book = json.loads(book_path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as err:
-            raise GenerateError(f"{book_path} is unreadable ({err}); remove it or the "
-                                "folder") from None
-    known: dict[str, Any] = dict(book.get("runs", {}))
+
+
+def _read_book(book_path: Path) -> dict[str, Any]:
+    """The campaign's book (``campaign.json``), empty when there is none yet."""
+    if not book_path.is_file():
+        return {}
+    try:
+        book: dict[str, Any] = json.loads(book_path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as err:
+        raise GenerateError(f"{book_path} is unreadable ({err}); remove it or the "
+                            "folder") from None
+    return book
+
+
+def _plan(specs: list[dict[str, Any]], out: Path, fmt: str, known: dict[str, Any], *,
+          overwrite: bool) -> tuple[list[dict[str, Any]], list[str]]:
+    """(the specs to write, the run ids already there from the same spec); a run there from
+    another spec is an error unless ``overwrite``. ``known`` (the book's runs) is updated."""
     todo: list[dict[str, Any]] = []
     skipped: list[str] = []
     for spec in specs:
@@ -149,40 +192,20 @@ def run_generate(specs: list[dict[str, Any]], out: str | Path, *, fmt: str = "fo
                 "raw runs are never rewritten: use another out=, remove it (make clean-data), "
                 "or pass overwrite=true")
         todo.append(spec)
-    for spec in todo:
-        rid = spec["run_id"]
-        known[rid] = _book_entry(spec, fmt, target_path(out, rid, fmt).name, status="pending")
-    if todo or known != book.get("runs", {}):
-        _write_book(book_path, known)
-    t0 = time.perf_counter()
-    results: list[dict[str, Any]] = []
-    bar = tqdm(total=len(todo), desc="generate", unit="run", disable=not progress,
-               file=sys.stderr)
+    return todo, skipped
+
+
+def _written(todo: list[dict[str, Any]], out: Path, fmt: str, compress: bool, *,
+             n_jobs: int) -> Iterable[dict[str, Any]]:
+    """Each run of ``todo`` written, as it lands (worker processes when n_jobs > 1)."""
     if n_jobs > 1 and len(todo) > 1:
         from joblib import Parallel, delayed
 
         par = Parallel(n_jobs=n_jobs, backend="loky", return_as="generator_unordered")
         me = os.getpid()
-        stream = par(delayed(write_one)(s, str(out), fmt, compress, parent_pid=me)
-                     for s in todo)
-    else:
-        stream = (write_one(s, str(out), fmt, compress) for s in todo)
-    by_id = {s["run_id"]: s for s in specs}
-    for res in stream:
-        results.append(res)
-        rid = res["run_id"]
-        known[rid] = _book_entry(by_id[rid], fmt, Path(res["path"]).name, status="done")
-        _write_book(book_path, known)
-        bar.update(1)
-    bar.close()
-    elapsed = time.perf_counter() - t0
-    if not book_path.is_file():
-        _write_book(book_path, known)
-    return {"out": str(out), "format": fmt, "written": sorted(r["run_id"] for r in results),
-            "skipped": skipped, "seconds": elapsed,
-            "simulate_s": sum(r["simulate_s"] for r in results),
-            "write_s": sum(r["write_s"] for r in results),
-            "cpu_s": sum(r["simulate_cpu_s"] + r["write_cpu_s"] for r in results)}
+        return par(delayed(write_one)(s, str(out), fmt, compress, parent_pid=me)  # type: ignore[no-any-return]
+                   for s in todo)
+    return (write_one(s, str(out), fmt, compress) for s in todo)
 
 
 def _book_entry(spec: Mapping[str, Any], fmt: str, name: str, *, status: str

@@ -32,7 +32,7 @@ import os
 import sys
 import time
 from collections.abc import Mapping
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -70,22 +70,8 @@ def run_ingest(source: str | Path, out: str | Path, *,
                          file=str(given))
     sync = sync or SyncOptions()
     plain = load_mapping(mapping) if mapping is not None else None
-    opts = options_hash(sync, plain)
-    single = single_run_source(given, mapping=plain)
-    # keys (the cache) are relative to the folder holding the runs, as when it is the source
-    src = given.parent if single is not None else given
-    real_dst = dst.resolve()
-    if real_dst == src or src in real_dst.parents:
-        raise RigIOError("the output folder must not be inside the source folder "
-                         "(raw runs are never written)", file=str(dst))
-    if single is not None:
-        sources = [single]
-        prune = False  # one run given: the other processed runs are not "gone"
-    else:
-        sources = discover(src, mapping=plain)
-    if not sources:
-        raise RigIOError("no raw run found in the source (run folders, .bag files, rosbag2 "
-                         "folders); nothing ingested, nothing removed", file=str(given))
+    src, sources, single = _sources(given, dst, plain)
+    prune = prune and not single  # one run given: the other processed runs are not "gone"
     clean_leftovers(dst)
     try:
         old = read_runs(dst)
@@ -93,58 +79,13 @@ def run_ingest(source: str | Path, out: str | Path, *,
         if not force:
             raise
         old = {}  # force reprocesses every run anyway: the index is written anew below
-    by_key = {str(m.get("source_key")): (rid, m) for rid, m in old.items()}
-    runs: dict[str, dict[str, Any]] = {}
-    accepted: list[dict[str, Any]] = []
-    rejected: list[dict[str, Any]] = []
+    batch = _Batch(src, dst, plain, sync, options_hash(sync, plain), limits or ReadLimits(),
+                   force, {str(m.get("source_key")): (rid, m) for rid, m in old.items()})
     bar = tqdm(sources, desc="ingest", unit="run", disable=not progress, file=sys.stderr)
     for s in bar:
-        key = s.key(src)
-        bar.set_postfix_str(key[-40:])
-        try:
-            digest, hashes = hash_files(s.files, root=src)
-        except OSError as err:
-            rejected.append(_rejection(s, key, RigIOError(f"unreadable: {err}",
-                                                          file=str(s.path))))
-            continue
-        cached = by_key.get(key)
-        if (not force and cached is not None and cached[1].get("source_hash") == digest
-                and cached[1].get("ingest_version") == INGEST_VERSION
-                and cached[1].get("options_hash") == opts
-                and cached[0] not in runs
-                and _output_intact(dst, cached[0], cached[1].get("output_sha256"))):
-            runs[cached[0]] = cached[1]
-            accepted.append({"run_id": cached[0], "source": key, "status": "unchanged",
-                             "n_samples": cached[1].get("n_samples")})
-            continue
-        try:
-            phys = load(s, mapping=plain, limits=limits or ReadLimits())
-            if phys.run_id in runs:
-                raise RigIOError(f"duplicate run_id: already ingested from "
-                                 f"{runs[phys.run_id]['source_key']!r}", run=phys.run_id,
-                                 file=str(s.path))
-            frame, info = process_run(phys, sync=sync)
-            meta = {**info, "source_key": key, "source_kind": s.kind, "source_path": str(s.path),
-                    "source_hash": digest, "source_files": hashes, "manifest": phys.manifest,
-                    "options_hash": opts, "sync_options": asdict(sync),
-                    "ingested_at": datetime.now(UTC).isoformat(timespec="seconds")}
-            written = write_run_rows(dst, frame, meta)
-            meta["output_sha256"] = file_sha256(written)
-        except WriteError:
-            # the run was fine, its output could not be stored (disk full ...): the stage
-            # stops here, before any prune, and removes nothing
-            raise
-        except RigIOError as err:
-            rejected.append(_rejection(s, key, err))
-            continue
-        except Exception as err:  # one broken run must not stop the batch
-            rejected.append(_rejection(s, key, RigIOError(
-                f"{type(err).__name__} while processing: {err}", run=s.path.name,
-                file=str(s.path))))
-            continue
-        runs[phys.run_id] = meta
-        accepted.append({"run_id": phys.run_id, "source": key, "status": "processed",
-                         "n_samples": meta["n_samples"]})
+        bar.set_postfix_str(s.key(src)[-40:])
+        batch.ingest(s)
+    runs, accepted, rejected = batch.runs, batch.accepted, batch.rejected
     refused = None
     if not accepted:  # a wrong source must not look like "every run was removed"
         refused = (f"all {len(rejected)} run(s) of the source were rejected: nothing "
@@ -161,7 +102,8 @@ def run_ingest(source: str | Path, out: str | Path, *,
         write_runs(dst, runs)
     report = {
         "source": str(src), "out": str(dst), "ingest_version": INGEST_VERSION,
-        "options_hash": opts, "finished_at": datetime.now(UTC).isoformat(timespec="seconds"),
+        "options_hash": batch.opts,
+        "finished_at": datetime.now(UTC).isoformat(timespec="seconds"),
         "elapsed_s": round(time.perf_counter() - started, 3),
         "n_sources": len(sources), "n_accepted": len(accepted), "n_rejected": len(rejected),
         "n_processed": sum(a["status"] == "processed" for a in accepted),
@@ -170,6 +112,103 @@ def run_ingest(source: str | Path, out: str | Path, *,
     }
     write_text_atomic(dst / REPORT, json.dumps(report, indent=1, default=str) + "\n")
     return report
+
+
+def _sources(given: Path, dst: Path, plain: dict[str, Any] | None
+             ) -> tuple[Path, list[Source], bool]:
+    """(the folder holding the runs, the runs, whether ``given`` is one run); the output
+    must not be inside the source, and a source without a run is refused."""
+    single = single_run_source(given, mapping=plain)
+    # keys (the cache) are relative to the folder holding the runs, as when it is the source
+    src = given.parent if single is not None else given
+    real_dst = dst.resolve()
+    if real_dst == src or src in real_dst.parents:
+        raise RigIOError("the output folder must not be inside the source folder "
+                         "(raw runs are never written)", file=str(dst))
+    sources = [single] if single is not None else discover(src, mapping=plain)
+    if not sources:
+        raise RigIOError("no raw run found in the source (run folders, .bag files, rosbag2 "
+                         "folders); nothing ingested, nothing removed", file=str(given))
+    return src, sources, single is not None
+
+
+@dataclass
+class _Batch:
+    """One ingest's runs as they go through: accepted (processed or unchanged) or rejected."""
+
+    src: Path
+    dst: Path
+    mapping: dict[str, Any] | None
+    sync: SyncOptions
+    opts: str
+    limits: ReadLimits
+    force: bool
+    #: the previous index by source key: (run id, its record)
+    by_key: dict[str, tuple[str, dict[str, Any]]]
+    runs: dict[str, dict[str, Any]] = field(default_factory=dict)
+    accepted: list[dict[str, Any]] = field(default_factory=list)
+    rejected: list[dict[str, Any]] = field(default_factory=list)
+
+    def ingest(self, s: Source) -> None:
+        """Source ``s``: left as it is when unchanged, else processed, or rejected."""
+        key = s.key(self.src)
+        try:
+            digest, hashes = hash_files(s.files, root=self.src)
+        except OSError as err:
+            self.rejected.append(_rejection(s, key, RigIOError(f"unreadable: {err}",
+                                                               file=str(s.path))))
+            return
+        if self._unchanged(key, digest):
+            return
+        try:
+            run_id, meta = self._process(s, key, digest, hashes)
+        except WriteError:
+            # the run was fine, its output could not be stored (disk full ...): the stage
+            # stops here, before any prune, and removes nothing
+            raise
+        except RigIOError as err:
+            self.rejected.append(_rejection(s, key, err))
+            return
+        except Exception as err:  # one broken run must not stop the batch
+            self.rejected.append(_rejection(s, key, RigIOError(
+                f"{type(err).__name__} while processing: {err}", run=s.path.name,
+                file=str(s.path))))
+            return
+        self.runs[run_id] = meta
+        self.accepted.append({"run_id": run_id, "source": key, "status": "processed",
+                              "n_samples": meta["n_samples"]})
+
+    def _unchanged(self, key: str, digest: str) -> bool:
+        """The source's run is processed already from the same files, ingest version and
+        options, and its output is intact: it is kept as it is."""
+        cached = self.by_key.get(key)
+        if (self.force or cached is None or cached[1].get("source_hash") != digest
+                or cached[1].get("ingest_version") != INGEST_VERSION
+                or cached[1].get("options_hash") != self.opts
+                or cached[0] in self.runs
+                or not _output_intact(self.dst, cached[0], cached[1].get("output_sha256"))):
+            return False
+        self.runs[cached[0]] = cached[1]
+        self.accepted.append({"run_id": cached[0], "source": key, "status": "unchanged",
+                              "n_samples": cached[1].get("n_samples")})
+        return True
+
+    def _process(self, s: Source, key: str, digest: str, hashes: Any
+                 ) -> tuple[str, dict[str, Any]]:
+        """Read, check, process and write one run: (its run id, its index record)."""
+        phys = load(s, mapping=self.mapping, limits=self.limits)
+        if phys.run_id in self.runs:
+            raise RigIOError(f"duplicate run_id: already ingested from "
+                             f"{self.runs[phys.run_id]['source_key']!r}", run=phys.run_id,
+                             file=str(s.path))
+        frame, info = process_run(phys, sync=self.sync)
+        meta = {**info, "source_key": key, "source_kind": s.kind, "source_path": str(s.path),
+                "source_hash": digest, "source_files": hashes, "manifest": phys.manifest,
+                "options_hash": self.opts, "sync_options": asdict(self.sync),
+                "ingested_at": datetime.now(UTC).isoformat(timespec="seconds")}
+        written = write_run_rows(self.dst, frame, meta)
+        meta["output_sha256"] = file_sha256(written)
+        return phys.run_id, meta
 
 
 def single_run_source(path: Path, *, mapping: dict[str, Any] | None = None) -> Source | None:
