@@ -1,5 +1,6 @@
-"""No import circle inside ``hysteresis`` (lazy, in-function imports included), and the model
-layer does not reach up into the pipelines."""
+"""No import circle inside ``hysteresis`` (lazy, in-function imports included), the model
+layer does not reach up into the pipelines, no module of ``pipelines`` imports a stage
+module, and the stages read their settings as attributes."""
 
 from __future__ import annotations
 
