@@ -4,10 +4,10 @@
     python -m pipelines.run_all +experiment=quick
     python -m pipelines.run_all paths.root=/tmp/cold-run          # everything in another folder
 
-Every stage runs in this process through its Hydra-free function (``run_generate``,
-``run_ingest``, and the ``run`` of fit/validate/report), each with its own composed stage
-config (``conf/generate.yaml``, ``conf/ingest.yaml``, ``conf/fit.yaml`` ...) plus
-``overrides.<stage>`` and the shared values of ``conf/pipeline.yaml`` (paths first). Every
+Every stage runs in this process through its core (:mod:`pipelines.core`: ``generate``,
+``ingest``, and the ``run`` of fit, validate, unseen_shape and report; never a stage's
+command module), each with its own typed settings (:func:`stage_config`: ``conf/<stage>.yaml``
+plus ``overrides.<stage>`` and the shared values of ``conf/pipeline.yaml``, paths first). Every
 stage skips what its content hashes say is unchanged. MLflow: one parent run per invocation
 and a child run per (family, configuration); when nothing changed at all, nothing new is
 logged (the log names the run that already holds the identical results); when only the
