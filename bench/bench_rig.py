@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from pipelines.generate import campaign_specs, run_generate
+from pipelines.core.generate import campaign_specs, run_generate
 from rig_io.virtual import VirtualRig, make_excitation
 from rig_io.virtual.rig import _Core
 

@@ -118,7 +118,8 @@ class Paths:
 
 
 def to_container(cfg: Any) -> dict[str, Any]:
-    """A DictConfig (or plain mapping) as a resolved plain dict, without the ``hydra`` node."""
+    """A DictConfig (or plain mapping) as a resolved plain dict, without the ``hydra`` node
+    (a stage's settings are :func:`pipelines.schemas.settings` instead)."""
     from omegaconf import DictConfig, OmegaConf
 
     if isinstance(cfg, DictConfig):
@@ -148,13 +149,15 @@ def read_processed(path: Path, columns: Sequence[str] | None = None) -> pd.DataF
                         else [c for c in columns if c in COLUMNS])
 
 
-def stage_columns(signals: Mapping[str, Any]) -> list[str]:
+def stage_columns(signals: Any) -> list[str]:
     """The dataset columns fit, validate and unseen_shape read: the configuration, run and
-    time columns and the two signals (``cfg["signals"]``)."""
+    time columns and the two signals (a stage's ``signals``: :class:`schemas.Signals`, or
+    a mapping of its fields)."""
+    from pipelines import schemas
     from pipelines.stages import REQUIRED_DATASET_COLUMNS
 
-    return list(dict.fromkeys([*REQUIRED_DATASET_COLUMNS, str(signals["input"]),
-                               str(signals["output"])]))
+    sig = schemas.settings(schemas.Signals, signals)
+    return list(dict.fromkeys([*REQUIRED_DATASET_COLUMNS, sig.input, sig.output]))
 
 
 def dataset_units(path: Path) -> tuple[str, str]:
@@ -210,23 +213,22 @@ def hydra_sweep_dir() -> Path | None:
     return None
 
 
-def identification_plan(cfg: Mapping[str, Any], dataset: pd.DataFrame,
-                        paths: Any) -> Any:
+def identification_plan(settings: Any, dataset: pd.DataFrame, paths: Any) -> Any:
     """The stage edge of :func:`pipelines.stages.identification_plan`: manifest roles from
-    ingest's ``runs.json``, the settings from ``cfg`` (a fit or validate config,
-    :class:`pipelines.schemas.IdentificationConfig`); every decision is logged."""
+    ingest's ``runs.json``, the rule's settings from a fit or validate stage's
+    (:class:`pipelines.schemas.IdentificationConfig`); every decision is logged."""
     import logging
 
-    from pipelines import stages
+    from pipelines import schemas, stages
     from rig_io.dataset import read_runs
 
+    # fit's settings have no held-out kinds: they never change which data identifies
+    heldout = settings.heldout if isinstance(settings, schemas.ValidateConfig) else []
     plan = stages.identification_plan(
-        dataset, fit_excitations=list(cfg["fit_excitations"]),
-        # fit's config has no held-out kinds: they never change which data identifies
-        heldout=list(cfg.get("heldout") or []),
-        fit_runs=list(cfg["fit_runs"]),
+        dataset, fit_excitations=list(settings.fit_excitations), heldout=list(heldout),
+        fit_runs=list(settings.fit_runs),
         roles=stages.manifest_roles(read_runs(Path(paths.processed))),
-        single_run_heldout_fraction=float(cfg["single_run_heldout_fraction"]))
+        single_run_heldout_fraction=float(settings.single_run_heldout_fraction))
     log = logging.getLogger("pipelines")
     for label, note in plan.notes.items():
         log.info("identification: %s: %s", label, note)

@@ -512,19 +512,18 @@ def champion_table(tracker: Any, names: Sequence[str] | None = None, *,
     return pd.DataFrame(rows)
 
 
-def register_pipeline(tracker: Any, cfg: Mapping[str, Any], *, fits: pd.DataFrame | None,
-                      metrics: pd.DataFrame | None, processed: Path) -> list[Registered]:
-    """``make pipeline``'s last step: register the champions when the ``tracking.registry``
-    config asks for it and this invocation fitted and validated."""
+def register_pipeline(tracker: Any, registry: Any, *, fit_excitation: str,
+                      fits: pd.DataFrame | None, metrics: pd.DataFrame | None,
+                      processed: Path) -> list[Registered]:
+    """``make pipeline``'s last step: register the champions of ``fit_excitation`` when the
+    ``tracking.registry`` settings (:class:`pipelines.tracking.RegistryGroup`) ask for it
+    and this invocation fitted and validated."""
     from pipelines.common import dataset_hash, dataset_units
 
-    reg = dict((cfg.get("tracking") or {}).get("registry") or {})
-    if not tracker.enabled or not reg.get("enabled", False) or fits is None \
+    if not tracker.enabled or not registry.enabled or fits is None \
             or metrics is None or fits.empty or metrics.empty:
         return []
-    fit_excitations = list(cfg.get("fit_excitations") or ["sine_decay"])
     return register_champions(
         tracker, fits, metrics, data_hash=dataset_hash(processed),
-        prefix=str(reg.get("prefix", DEFAULT_PREFIX)), alias=str(reg.get("alias", ALIAS)),
-        fit_excitation=str(cfg.get("identified_excitation") or fit_excitations[0]),
+        prefix=registry.prefix, alias=registry.alias, fit_excitation=fit_excitation,
         units=dataset_units(processed), processed=processed)

@@ -13,8 +13,10 @@ knobs: :class:`WorkflowSettings`). A free mapping (``auto_families``, the study'
 it replaces the default mapping whole (:func:`with_defaults`).
 
 Config groups (``paths``, ``tracking``, ``family``, ``rig``, ``campaign``, ...) stay groups:
-their fields are typed ``Any``. A stage's Hydra-free ``run(cfg)`` passes its plain config
-through :func:`with_defaults`, so a hand-written config gets the same defaults and checks.
+their fields are typed ``Any``. A stage's Hydra-free core converts its config once with
+:func:`settings` (a composed config and a hand-written mapping alike get the same defaults
+and checks) and reads attributes; :func:`with_defaults` (a plain dict) serves the stages not
+yet moved to that shape.
 """
 
 from __future__ import annotations

@@ -357,38 +357,54 @@ def identification_plan(dataset: pd.DataFrame, *, fit_excitations: Sequence[str]
             continue
         (run_id, _), = by_run.items()
         located = located or ConfigurationRows(dataset)
-        rows = located.rows(config)
-        run = rows[rows["run_id"].astype(str) == run_id]
-        run = run.sort_values("t_s", kind="stable")
-        kind = str(run["excitation"].iloc[0])
-        cut = tail_start(len(run), single_run_heldout_fraction)
-        if cut is None:
+        split = _split_single_run(located.rows(config), run_id, single_run_heldout_fraction)
+        if split is None:
             continue
-        head, tail = run.iloc[:cut].copy(), run.iloc[cut:].copy()
-        tail["run_id"] = run_id + TAIL
-        tail["excitation"] = kind + TAIL
+        head, tail, notes[label] = split
         splits[config] = (head, tail)
+        kind = str(head["excitation"].iloc[0])
         if kind not in fit_kinds:
             fit_kinds.append(kind)
         if kind + TAIL not in held_kinds:
             held_kinds.append(kind + TAIL)
-        t = run["t_s"].to_numpy(dtype=np.float64)
-        notes[label] = split_note(str(run_id), t[cut] - t[0], t[-1] - t[cut],
-                                  single_run_heldout_fraction, kind + TAIL)
-    if splits:
-        pieces: list[pd.DataFrame] = []
-        for key, rows in dataset.groupby(keys, sort=True, dropna=False, observed=True):
-            split = splits.get(Configuration(str(key[0]), _num(key[1]), _num(key[2])))
-            pieces += list(split) if split is not None else [rows]
-        out = pd.concat(pieces, ignore_index=True)
-    else:  # nothing split: the dataset itself (copy-on-write: no copy of its data)
-        out = dataset.reset_index(drop=True)
+    out = _with_splits(dataset, splits, keys)
     for col in ("run_id", "excitation"):
         if isinstance(dataset[col].dtype, pd.CategoricalDtype):
             out[col] = out[col].astype(str)
     out = _held_out_by_role(out, roles, fit_kinds, held_kinds)
     return IdentificationPlan(out, tuple(fit_kinds), tuple(held_kinds), frozenset(chosen),
                               notes, frozenset(all_marked))
+
+
+def _split_single_run(rows: pd.DataFrame, run_id: str, fraction: float
+                      ) -> tuple[pd.DataFrame, pd.DataFrame, str] | None:
+    """A configuration's one run as (identifying head, held-out tail ``<kind>.tail``, the
+    note saying so); None when the run is too short to split."""
+    run = rows[rows["run_id"].astype(str) == run_id]
+    run = run.sort_values("t_s", kind="stable")
+    kind = str(run["excitation"].iloc[0])
+    cut = tail_start(len(run), fraction)
+    if cut is None:
+        return None
+    head, tail = run.iloc[:cut].copy(), run.iloc[cut:].copy()
+    tail["run_id"] = run_id + TAIL
+    tail["excitation"] = kind + TAIL
+    t = run["t_s"].to_numpy(dtype=np.float64)
+    return head, tail, split_note(str(run_id), t[cut] - t[0], t[-1] - t[cut], fraction,
+                                  kind + TAIL)
+
+
+def _with_splits(dataset: pd.DataFrame,
+                 splits: Mapping[Configuration, tuple[pd.DataFrame, pd.DataFrame]],
+                 keys: list[str]) -> pd.DataFrame:
+    """``dataset`` with each split configuration's rows replaced by its head and tail."""
+    if not splits:  # nothing split: the dataset itself (copy-on-write: no copy of its data)
+        return dataset.reset_index(drop=True)
+    pieces: list[pd.DataFrame] = []
+    for key, rows in dataset.groupby(keys, sort=True, dropna=False, observed=True):
+        split = splits.get(Configuration(str(key[0]), _num(key[1]), _num(key[2])))
+        pieces += list(split) if split is not None else [rows]
+    return pd.concat(pieces, ignore_index=True)
 
 
 def _by_configuration(run_kinds: pd.Series) -> Iterable[tuple[tuple[Any, ...],

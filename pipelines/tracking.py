@@ -26,7 +26,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -82,25 +82,70 @@ class TrackingSettings:
         return (self.root / "mlartifacts").resolve().as_uri()
 
 
-def settings_from_config(tracking: Mapping[str, Any], *, root: str | Path) -> TrackingSettings:
+@dataclass
+class RegistryGroup:
+    """``tracking.registry``: register each configuration's champion after ``make pipeline``
+    as ``<prefix>.<configuration label>`` with ``alias``."""
+
+    enabled: bool = False
+    prefix: str = "tsm"
+    alias: str = "champion"
+
+
+@dataclass
+class TrackingGroup:
+    """The ``tracking`` config group (conf/tracking/): where MLflow logs."""
+
+    enabled: bool = True
+    uri: str | None = None
+    artifact_location: str | None = None
+    experiment: str = "tsm-hysteresis"
+    registry: RegistryGroup = field(default_factory=RegistryGroup)
+
+
+def tracking_group(tracking: Any) -> TrackingGroup:
+    """The ``tracking`` group (a mapping, None = every default) as typed settings."""
+    from pipelines import schemas
+
+    return schemas.settings(TrackingGroup, tracking or {})
+
+
+def settings_from_config(tracking: Any, *, root: str | Path) -> TrackingSettings:
     """Build :class:`TrackingSettings` from the ``tracking`` config group."""
+    group = tracking_group(tracking)
     return TrackingSettings(
-        enabled=bool(tracking.get("enabled", True)),
-        uri=tracking.get("uri") or None,
-        artifact_location=tracking.get("artifact_location") or None,
-        experiment=str(tracking.get("experiment", "tsm-hysteresis")),
+        enabled=group.enabled,
+        uri=group.uri or None,
+        artifact_location=group.artifact_location or None,
+        experiment=group.experiment,
         root=Path(root).resolve(),
     )
 
 
-def stage_tracker(cfg: Mapping[str, Any]) -> Tracker | None:
+@dataclass
+class _StageEdge:
+    """The two groups of a stage config a tracker is built from."""
+
+    paths: Any = None
+    tracking: Any = None
+
+
+@dataclass
+class _Root:
+    root: str = "."
+
+
+def stage_tracker(cfg: Any) -> Tracker | None:
     """The tracker for a stage's plain config (its ``tracking`` group and ``paths.root``), or
-    ``None`` when the config does not switch tracking on."""
-    tracking = dict(cfg.get("tracking") or {})
-    if not tracking.get("enabled", False):
+    ``None`` when the config does not switch tracking on. The stages built on
+    :class:`pipelines.skeleton.Stage` get theirs from :func:`pipelines.skeleton.tracker_for`."""
+    from pipelines import schemas
+
+    edge = schemas.settings(_StageEdge, cfg)
+    if not edge.tracking or not tracking_group(edge.tracking).enabled:
         return None
-    root = (cfg.get("paths") or {}).get("root", ".")
-    return Tracker(settings_from_config(tracking, root=root))
+    root = schemas.settings(_Root, edge.paths or {}).root
+    return Tracker(settings_from_config(edge.tracking, root=root))
 
 
 # --------------------------------------------------------------------------------------
@@ -588,15 +633,9 @@ def log_model_runs(
     import json
     import tempfile
 
-    from mlflow.utils.mlflow_tags import MLFLOW_LOGGED_ARTIFACTS
-
     from pipelines.stages import Configuration
 
-    by_model: dict[tuple[Any, ...], pd.DataFrame] = {}
-    if metrics is not None and not metrics.empty:
-        keys = ["family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation"]
-        for key, group in metrics.groupby(keys, dropna=False, observed=True, sort=False):
-            by_model[_model_key(*key)] = group.reset_index(drop=True)
+    by_model = _metrics_by_model(metrics)
     ids: list[str] = []
     several_rigs = fits["rig"].nunique() > 1 if len(fits) else False
     several_excitations = fits["fit_excitation"].nunique() > 1 if len(fits) else False
@@ -622,26 +661,8 @@ def log_model_runs(
                 "fit_excitation": fit["fit_excitation"], "fit_run_ids": fit["fit_run_ids"],
                 "model_key": fit["key"], "status": "failed" if failed else "ok",
             }
-            if mine is not None:
-                _jsonable(mine).to_json(staged / "metrics.json", orient="split", index=False,
-                                        date_format="iso")
-                run_tags[MLFLOW_LOGGED_ARTIFACTS] = json.dumps(
-                    [{"path": "metrics.json", "type": "table"}])
-            if _present(fit.get("model_json")):
-                (staged / "model").mkdir()
-                (staged / "model" / "model.json").write_text(str(fit["model_json"]))
-            if failed:
-                (staged / "error.txt").write_text(str(fit["error"]))
             figures = [Path(p) for p in (plots or {}).get(config.label, ()) if Path(p).exists()]
-            if figures:
-                (staged / "plots").mkdir()
-                for fig in figures:  # symlinks: the upload copies the real file once
-                    (staged / "plots" / fig.name).symlink_to(fig.resolve())
-            if hydra_dir is not None and hydra_dir.is_dir():
-                (staged / ".hydra").mkdir()
-                for f in hydra_dir.iterdir():
-                    if f.is_file():
-                        (staged / ".hydra" / f.name).symlink_to(f.resolve())
+            run_tags |= _stage_artifacts(staged, fit, mine, figures, hydra_dir)
 
             name = model_run_name(str(fit["family"]), config, str(fit["fit_excitation"]),
                                   rig=several_rigs, excitation=several_excitations)
@@ -662,6 +683,47 @@ def log_model_runs(
             tracker.end_run(run_id, status="FAILED" if failed else "FINISHED")
             ids.append(run_id)
     return ids
+
+
+def _metrics_by_model(metrics: pd.DataFrame | None) -> dict[tuple[Any, ...], pd.DataFrame]:
+    """Each model's rows of the metrics table (:func:`_model_key`)."""
+    by_model: dict[tuple[Any, ...], pd.DataFrame] = {}
+    if metrics is not None and not metrics.empty:
+        keys = ["family", "rig", "curve_angle_deg", "radius_mm", "fit_excitation"]
+        for key, group in metrics.groupby(keys, dropna=False, observed=True, sort=False):
+            by_model[_model_key(*key)] = group.reset_index(drop=True)
+    return by_model
+
+
+def _stage_artifacts(staged: Path, fit: Mapping[str, Any], mine: pd.DataFrame | None,
+                     figures: Iterable[Path], hydra_dir: Path | None) -> dict[str, Any]:
+    """A model run's files in ``staged`` (uploaded in one call): its metrics table, model,
+    error, figures and ``.hydra``; the tags saying what was logged."""
+    import json
+
+    from mlflow.utils.mlflow_tags import MLFLOW_LOGGED_ARTIFACTS
+
+    tags: dict[str, Any] = {}
+    if mine is not None:
+        _jsonable(mine).to_json(staged / "metrics.json", orient="split", index=False,
+                                date_format="iso")
+        tags[MLFLOW_LOGGED_ARTIFACTS] = json.dumps([{"path": "metrics.json", "type": "table"}])
+    if _present(fit.get("model_json")):
+        (staged / "model").mkdir()
+        (staged / "model" / "model.json").write_text(str(fit["model_json"]))
+    if _present(fit.get("error")):
+        (staged / "error.txt").write_text(str(fit["error"]))
+    figures = list(figures)
+    if figures:
+        (staged / "plots").mkdir()
+        for fig in figures:  # symlinks: the upload copies the real file once
+            (staged / "plots" / fig.name).symlink_to(fig.resolve())
+    if hydra_dir is not None and hydra_dir.is_dir():
+        (staged / ".hydra").mkdir()
+        for f in hydra_dir.iterdir():
+            if f.is_file():
+                (staged / ".hydra" / f.name).symlink_to(f.resolve())
+    return tags
 
 
 def shape_text(config: Any) -> str:
@@ -765,9 +827,10 @@ class MlflowSweepCallback(_HydraCallback):
     def on_multirun_start(self, config: Any, **kwargs: Any) -> None:
         from omegaconf import OmegaConf
 
-        tracking = OmegaConf.to_container(config.get("tracking", {}), resolve=True) or {}
+        tracking = (OmegaConf.to_container(config.tracking, resolve=True)
+                    if "tracking" in config else {})
         root = config.paths.root if "paths" in config else "."
-        settings = settings_from_config(tracking, root=root)  # type: ignore[arg-type]
+        settings = settings_from_config(tracking, root=root)
         if not settings.enabled:
             return
         self._tracker = Tracker(settings)

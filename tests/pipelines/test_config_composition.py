@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict
 from pathlib import Path
 
 import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from pipelines import fit as fit_stage
 from pipelines.common import CONF_DIR, Paths, to_container
+from pipelines.core import fit as fit_stage
 from pipelines.run_all import EXTERNAL_STAGES, OWN_STAGES, stage_config
 
 STAGES = ("fit", "validate", "report", "pipeline")
@@ -86,14 +87,14 @@ def test_pipeline_forwards_shared_values_to_each_stage(tmp_path: Path) -> None:
         f"paths.root={tmp_path}", "config.curve_angle_deg=45", "n_jobs=1",
         "heldout=[triangle_decay]", "overrides.fit=['families=[linear]']"]))
     fit_cfg = stage_config("fit", pipeline)
-    assert fit_cfg["families"] == ["linear"]
-    assert fit_cfg["config"]["curve_angle_deg"] == 45 and fit_cfg["n_jobs"] == 1
-    assert Paths.from_config(fit_cfg["paths"]).root == tmp_path
+    assert fit_cfg.families == ["linear"]
+    assert fit_cfg.config.curve_angle_deg == 45 and fit_cfg.n_jobs == 1
+    assert Paths.from_config(fit_cfg.paths).root == tmp_path
     val_cfg = stage_config("validate", pipeline)
-    assert val_cfg["heldout"] == ["triangle_decay"]
+    assert val_cfg.heldout == ["triangle_decay"]
     rep_cfg = stage_config("report", pipeline)
-    assert rep_cfg["fit_excitation"] == "sine_decay"
-    ing = OmegaConf.create(stage_config("report", pipeline))
+    assert rep_cfg.fit_excitation == "sine_decay"
+    ing = OmegaConf.structured(stage_config("report", pipeline))
     assert ing.paths.reports == str(tmp_path / "data" / "reports")
 
 
@@ -226,15 +227,15 @@ def test_pipeline_experiments_compose_every_stage(experiment: str, tmp_path: Pat
     pipeline = to_container(_compose("pipeline", [f"+experiment={experiment}",
                                                   f"paths.root={tmp_path}"]))
     for stage in ("generate", "ingest"):
-        assert compose_stage(stage, stage_overrides(stage, pipeline))["out"]
+        assert compose_stage(stage, stage_overrides(stage, pipeline)).out
     for stage in OWN_STAGES:
         cfg = stage_config(stage, pipeline)
-        assert set(_schema_defaults(stage)) <= set(cfg)
+        assert set(_schema_defaults(stage)) <= set(asdict(cfg))
     if experiment == "gamma_only":
-        assert stage_config("fit", pipeline)["families"] == ["gamma"]
+        assert stage_config("fit", pipeline).families == ["gamma"]
     if experiment == "bending_joint":
         generate = compose_stage("generate", stage_overrides("generate", pipeline))
-        assert generate["effects"]["time_delay"] == 12.0
+        assert generate.effects["time_delay"] == 12.0
 
 
 @pytest.mark.parametrize("experiment", ["compensation_default", "compensation_quick",
@@ -382,10 +383,10 @@ def test_a_hand_written_pipeline_config_forwards_the_schema_defaults(tmp_path: P
     pipeline = {"paths": composed["paths"], "tracking": composed["tracking"],
                 "overrides": {"fit": ["families=[linear]"]}}
     fit_cfg = stage_config("fit", pipeline)
-    assert fit_cfg["families"] == ["linear"]
-    assert fit_cfg["fit_excitations"] == ValidateConfig().fit_excitations
+    assert fit_cfg.families == ["linear"]
+    assert fit_cfg.fit_excitations == ValidateConfig().fit_excitations
     val_cfg = stage_config("validate", pipeline)
-    assert val_cfg["heldout"] == ValidateConfig().heldout and val_cfg["cross"] is False
+    assert val_cfg.heldout == ValidateConfig().heldout and val_cfg.cross is False
     unseen = stage_config("unseen_shape", pipeline)
-    assert unseen["fit_excitation"] == "sine_decay"
-    assert unseen["eval_excitations"] == ValidateConfig().heldout
+    assert unseen.fit_excitation == "sine_decay"
+    assert unseen.eval_excitations == ValidateConfig().heldout

@@ -11,7 +11,7 @@ import pytest
 import hysteresis.play
 import hysteresis.ukf
 from pipelines import cache
-from pipelines import fit as fit_stage
+from pipelines.core import fit as fit_stage
 from tests.pipelines.pipeline_data import make_dataset, stage_cfg
 
 

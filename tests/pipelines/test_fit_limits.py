@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from pipelines import fit as fit_stage
+from pipelines.core import fit as fit_stage
 from pipelines.stages import PipelineError
 from tests.pipelines.pipeline_data import make_dataset, stage_cfg
 

@@ -12,7 +12,7 @@ import pytest
 
 from hysteresis.base import HysteresisModel
 from pipelines import artifacts, stages
-from pipelines import fit as fit_stage
+from pipelines.core import fit as fit_stage
 from pipelines.stages import FamilySpec, PipelineError
 from tests.pipelines.pipeline_data import make_dataset, stage_cfg, write_dataset
 

@@ -13,7 +13,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 from pipelines.common import CONF_DIR
-from pipelines.generate import (
+from pipelines.core.generate import (
     CAMPAIGN_FILE,
     GenerateError,
     campaign_specs,

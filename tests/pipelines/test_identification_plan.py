@@ -11,9 +11,9 @@ import pandas as pd
 import pytest
 
 from hysteresis import make_family
-from pipelines import fit as fit_stage
 from pipelines import stages
-from pipelines import validate as validate_stage
+from pipelines.core import fit as fit_stage
+from pipelines.core import validate as validate_stage
 from pipelines.stages import PipelineError, identification_plan
 from tests.pipelines.pipeline_data import make_dataset, stage_cfg, write_dataset
 

@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 
 from pipelines import artifacts
-from pipelines import fit as fit_stage
-from pipelines import validate as validate_stage
-from pipelines.generate import GenerateError, campaign_specs, run_generate
+from pipelines.core import fit as fit_stage
+from pipelines.core import validate as validate_stage
+from pipelines.core.generate import GenerateError, campaign_specs, run_generate
 from pipelines.ingest import run_ingest
 from rig_io.dataset import read_dataset, read_runs, run_file
 from rig_io.errors import RigIOError
@@ -166,7 +166,7 @@ def test_a_truncated_processed_file_is_detected_and_processed_again(
 
 
 def test_a_truncated_report_output_is_redrawn_not_trusted(tmp_path: Path) -> None:
-    from pipelines import report as report_stage
+    from pipelines.core import report as report_stage
 
     data = make_dataset(angles=(90,), radii=(30,), dt=0.1)
     cfg = stage_cfg(tmp_path, families=["linear", "gamma"])

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipelines import fit as fit_stage
+from pipelines.core import fit as fit_stage
 from pipelines.ingest import run_ingest
 from rig_io.dataset import read_dataset
 from rig_io.folder import write_run_folder

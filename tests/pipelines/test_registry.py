@@ -14,9 +14,9 @@ import pandas as pd
 import pytest
 
 from hysteresis.base import HysteresisModel
-from pipelines import fit as fit_stage
 from pipelines import registry, tracking
-from pipelines import validate as validate_stage
+from pipelines.core import fit as fit_stage
+from pipelines.core import validate as validate_stage
 from tests.pipelines.pipeline_data import make_dataset, mlflow_store, stage_cfg
 
 REPO = Path(__file__).resolve().parents[2]

@@ -12,10 +12,10 @@ import pytest
 
 from hysteresis.gamma import GammaModel
 from hysteresis.play import play_matrix
-from pipelines import fit as fit_stage
-from pipelines import report as report_stage
 from pipelines import stages
-from pipelines import validate as validate_stage
+from pipelines.core import fit as fit_stage
+from pipelines.core import report as report_stage
+from pipelines.core import validate as validate_stage
 from tests.pipelines.pipeline_data import make_dataset, stage_cfg
 
 Q_TRUE = np.array([0.1, 0.3, 0.0, 0.2, 0.15, 0.05, 0.0, 0.1, 0.05, 0.03, 0.02])

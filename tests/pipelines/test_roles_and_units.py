@@ -11,10 +11,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from pipelines import fit as fit_stage
 from pipelines import plots, registry, stages
-from pipelines import validate as validate_stage
-from pipelines.report import with_units
+from pipelines.core import fit as fit_stage
+from pipelines.core import validate as validate_stage
+from pipelines.core.report import with_units
 from tests.pipelines.pipeline_data import make_dataset, stage_cfg, write_dataset
 
 

@@ -13,10 +13,10 @@ from pathlib import Path
 import pytest
 
 from pipelines import artifacts, cache, tracking
-from pipelines import fit as fit_stage
-from pipelines import report as report_stage
-from pipelines import validate as validate_stage
 from pipelines.common import run_stage
+from pipelines.core import fit as fit_stage
+from pipelines.core import report as report_stage
+from pipelines.core import validate as validate_stage
 from pipelines.ingest import run_ingest
 from pipelines.stages import Configuration, PipelineError
 from rig_io.dataset import RUNS, read_dataset

@@ -11,9 +11,9 @@ import mlflow
 import pytest
 from mlflow import MlflowClient
 
-from pipelines import fit as fit_stage
 from pipelines import tracking
-from pipelines import validate as validate_stage
+from pipelines.core import fit as fit_stage
+from pipelines.core import validate as validate_stage
 from tests.pipelines.pipeline_data import make_dataset, mlflow_store, stage_cfg
 
 

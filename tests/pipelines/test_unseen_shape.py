@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 
 from hysteresis.gamma import GammaModel
-from pipelines import fit as fit_stage
-from pipelines import unseen_shape
+from pipelines.core import fit as fit_stage
+from pipelines.core import unseen_shape
 from tests.pipelines.pipeline_data import make_dataset, stage_cfg
 
 ANGLES = (15, 30, 45, 60, 75, 90)
@@ -109,8 +109,8 @@ def test_too_few_configurations_are_skipped(
 
 
 def test_the_report_shows_the_summary(fitted: tuple[Path, pd.DataFrame, pd.DataFrame]) -> None:
-    from pipelines import report as report_stage
-    from pipelines import validate as validate_stage
+    from pipelines.core import report as report_stage
+    from pipelines.core import validate as validate_stage
 
     root, data, fits = fitted
     unseen_shape.run(_cfg(root), dataset=data, fits=fits)

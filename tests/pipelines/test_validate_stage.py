@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipelines import fit as fit_stage
 from pipelines import stages
-from pipelines import validate as validate_stage
+from pipelines.core import fit as fit_stage
+from pipelines.core import validate as validate_stage
 from tests.pipelines.pipeline_data import make_dataset, stage_cfg
 
 EXPECTED_COLUMNS = [
@@ -103,7 +103,7 @@ def test_cross_excitation_matrix(tmp_path: Path) -> None:
     assert ((metrics["fit_excitation"] == metrics["eval_excitation"])
             == (metrics["split"] == "fit")).all()
     # the report shows the matrix (mean RMSE, identification x evaluation excitation)
-    from pipelines import report as report_stage
+    from pipelines.core import report as report_stage
 
     report_stage.run({**cfg, "fit_excitation": "sine_decay", "plots": {"dpi": 30}})
     md = (tmp_path / "data/reports/report.md").read_text()
