@@ -40,6 +40,8 @@ STAGE_OUTPUTS: dict[str, tuple[str, ...]] = {
 IGNORED_PARTS = {"mlruns", "mlflow", ".hydra", "outputs", "multirun", "__pycache__",
                  "numba-cache", ".locks"}
 IGNORED_SUFFIXES = {".log", ".db", ".sqlite", ".lock", ".tmp", ".sha256"}
+#: A table column that is a time measurement (Table 4.4's per-step times and their ratios).
+TIMING_COLUMN = re.compile(r"(_ms|_s|_seconds|^ratio_to_ours)$")
 #: Files that are wall-clock measurements as a whole: only their keys are compared.
 TIMING_FILES = {"pipeline_timing.json"}
 #: A key or column that measures time spent, or tells when: masked before comparing.
@@ -90,7 +92,28 @@ def _keys_of(text: str) -> Any:
     return keys(json.loads(text))
 
 
+def _mask_markdown_tables(text: str) -> str:
+    """The cells of timing columns in markdown tables (``| ... | mean_ms | ... |``)."""
+    out: list[str] = []
+    timing: list[int] = []
+    for line in text.splitlines():
+        if not line.startswith("|"):
+            timing = []
+            out.append(line)
+            continue
+        cells = line.split("|")
+        if not timing and not set(line) <= set("|-: "):
+            timing = [i for i, c in enumerate(cells) if TIMING_COLUMN.search(c.strip())]
+            if not timing:
+                timing = [-1]  # a table without timing columns
+        out.append("|".join("<time>" if i in timing and not set(c) <= set("-: ")
+                            and c.strip() not in ("",) and not TIMING_COLUMN.search(c.strip())
+                            else c for i, c in enumerate(cells)))
+    return "\n".join(out)
+
+
 def _masked_text(text: str, root: Path) -> str:
+    text = _mask_markdown_tables(text)
     text = text.replace(str(root.resolve()), "<root>").replace(str(root), "<root>")
     text = ISO_TIME.sub("<when>", text)
     text = HEX_KEY.sub("<key>", text)
@@ -101,7 +124,8 @@ def _table(path: Path) -> Any:
     import pandas as pd
 
     frame = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
-    keep = [c for c in frame.columns if not WALL_CLOCK.search(str(c).lower())]
+    keep = [c for c in frame.columns if not WALL_CLOCK.search(str(c).lower())
+            and not TIMING_COLUMN.search(str(c))]
     return frame[keep]
 
 
