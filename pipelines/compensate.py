@@ -16,13 +16,14 @@ papers' schemes on the same plant and the same desired trajectories:
   stroke segment, PD vs AME-PD tracking eq. 32.
 
 This module is the stage's edge; the experiments are the package :mod:`pipelines.compensation`.
-:func:`stage` = typed settings (``schemas.settings(CompensateConfig, cfg)``) ->
-:func:`~pipelines.compensation.experiments.run` (the pure core: tables, figures, headline
-numbers) -> :func:`write` -> :func:`track`. Outputs (atomic): ``<out_dir>/*.parquet`` (tidy
-tables), ``<out_dir>/plots/*.png``, the report section ``<report>`` (markdown), and an MLflow
-run (``pipelines.tracking``) with the tables, plots and headline metrics. The physics is
-reached only through a :class:`~pipelines.compensation.rig.RigBackend` (default:
-``rig_io.virtual``), so tests can swap in stand-in plants.
+:func:`stage` = typed settings (``schemas.settings(CompensateConfig, cfg)``) -> :func:`run`
+(the pure core :func:`pipelines.compensation.experiments.run`: tables, figures, headline
+numbers; plus seed 001's registered models when asked for) -> :func:`write` -> :func:`track`.
+Outputs (atomic): ``<out_dir>/*.parquet`` (tidy tables), ``<out_dir>/plots/*.png``, the report
+section ``<report>`` (markdown), and an MLflow run (``pipelines.tracking``) with the tables,
+plots and headline metrics. The physics is reached only through a
+:class:`~pipelines.compensation.rig.RigBackend` (default: ``rig_io.virtual``), so tests can
+swap in stand-in plants.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ from typing import Any
 
 from pipelines import schemas
 from pipelines.common import run_stage
-from pipelines.compensation.experiments import run
+from pipelines.compensation import experiments
 from pipelines.compensation.report_section import report_text
 from pipelines.compensation.result import CompensationResult
 from pipelines.compensation.rig import RigBackend
@@ -51,7 +52,7 @@ log = logging.getLogger(__name__)
 
 
 # ---------------------------------------------------------------------------------------------
-# Reading: the registry's champions (seed001.ours.registry)
+# Reading (the registry's champions, seed001.ours.registry) and running
 # ---------------------------------------------------------------------------------------------
 def registry_model(ours: Seed001Ours, rig: str, phi: float, r: float, *,
                    tracking_uri: str) -> Any:
@@ -80,6 +81,13 @@ def champion_loader(settings: CompensateConfig) -> Champion | None:
         return None
     return functools.partial(registry_model, s1.ours, s1.rig,
                              tracking_uri=_tracking_uri(settings))
+
+
+def run(settings: CompensateConfig, *, backend: RigBackend | None = None) -> CompensationResult:
+    """The enabled experiments (:func:`pipelines.compensation.experiments.run`, the pure
+    core) with seed 001's registered champions read in when ``seed001.ours.registry`` is set:
+    the only input the stage reads."""
+    return experiments.run(settings, backend=backend, champion=champion_loader(settings))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -171,7 +179,7 @@ def stage(cfg: Any, *, backend: RigBackend | None = None) -> CompensationResult:
     from pipelines.tracking import stage_tracker
 
     settings = schemas.settings(CompensateConfig, cfg)
-    result = run(settings, backend=backend, champion=champion_loader(settings))
+    result = run(settings, backend=backend)
     write(result, settings)
     tracker = stage_tracker({"tracking": settings.tracking, "paths": settings.paths})
     if tracker is not None:
