@@ -14,8 +14,13 @@ from hydra import compose, initialize_config_dir
 from hysteresis import make_family
 from hysteresis.coleman_hodgdon import ColemanHodgdonModel
 from hysteresis.compensation import sine_profile
-from pipelines import compensate
-from pipelines.compensate import RigBackend, table42_wide
+from pipelines import compensate, schemas
+from pipelines.compensation import experiments
+from pipelines.compensation.models import fit_reachable
+from pipelines.compensation.rig import RigBackend, drive
+from pipelines.compensation.seed001 import fit_shape_aware
+from pipelines.compensation.settings import CompensateConfig, Seed001Settings
+from pipelines.compensation.tables import table42_wide
 from tests.pipelines.pipeline_data import mlflow_store
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
@@ -77,8 +82,12 @@ def _cfg(tmp_path: Path, *overrides: str) -> Any:
 
 
 def test_quick_run_writes_every_table_report_and_plot(tmp_path: Path) -> None:
-    cfg = _cfg(tmp_path, "tracking=off")
-    tables = compensate.run(cfg, backend=BACKEND)
+    settings = schemas.settings(CompensateConfig, _cfg(tmp_path, "tracking=off"))
+    result = experiments.run(settings, backend=BACKEND)
+    assert not [p for p in tmp_path.rglob("*") if p.is_file()]  # the core writes nothing
+    files = compensate.write(result, settings)
+    assert all(p.is_file() for p in files) and files == compensate.output_files(result, settings)
+    tables = result.tables
     out = tmp_path / "data" / "reports" / "compensation"
     for name in ("seed001_table42", "seed001_table44", "seed001_fits", "seed002_table1",
                  "seed000_estimation", "seed000_tracking", "seed000_reference"):
@@ -124,7 +133,7 @@ def test_run_logs_tables_and_metrics_to_mlflow(tmp_path: Path) -> None:
     mlflow_store(tmp_path)  # an initialised store: the migrations are not what is tested
     cfg = _cfg(tmp_path, "tracking=local", "plots=false", "seed001.enabled=false",
                "seed002.enabled=false")
-    compensate.run(cfg, backend=BACKEND)
+    compensate.stage(cfg, backend=BACKEND)
     from mlflow import MlflowClient
 
     client = MlflowClient(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
@@ -141,7 +150,17 @@ def test_run_logs_tables_and_metrics_to_mlflow(tmp_path: Path) -> None:
 def test_bad_configuration_mode_is_named(tmp_path: Path) -> None:
     cfg = _cfg(tmp_path, "tracking=off", "seed001.all_configurations=some")
     with pytest.raises(Exception, match="all_configurations must be none|quick|full"):
-        compensate.run(cfg, backend=BACKEND)
+        compensate.stage(cfg, backend=BACKEND)
+
+
+def test_a_registry_setting_needs_the_champions_given_to_the_core(tmp_path: Path) -> None:
+    settings = schemas.settings(CompensateConfig, _cfg(tmp_path, "tracking=off",
+                                                       "seed001.ours.registry=tsm"))
+    with pytest.raises(ValueError, match="seed001.ours.registry is set"):
+        experiments.run(settings, backend=BACKEND)
+    assert compensate.champion_loader(settings) is not None
+    settings.seed001.enabled = False
+    assert compensate.champion_loader(settings) is None
 
 
 def test_an_unreachable_fit_is_refitted_with_narrower_plays() -> None:
@@ -149,12 +168,11 @@ def test_an_unreachable_fit_is_refitted_with_narrower_plays() -> None:
     u = 1.0 + np.sin(0.5 * t) * np.minimum(1.0, t / 5.0)  # inputs 0..2
     y = 10.0 * np.clip(u - 0.2, 0.0, None)
     params = {"constraint": "free", "fit_offset": True, "n_operators": 11, "max_threshold": 3.0}
-    model, note = compensate.fit_reachable("gamma", u, y, params, label="test")
+    model, note = fit_reachable("gamma", u, y, params, label="test")
     assert "thresholds up to 3 reach" in note and "refitted with max_threshold=" in note
     assert model.thresholds_.max() <= 0.75 * float(np.ptp(u)) + 1e-12
     assert model.weights_.sum() > 0
-    ok, none = compensate.fit_reachable("gamma", u, y, {**params, "max_threshold": 1.0},
-                                        label="test")
+    ok, none = fit_reachable("gamma", u, y, {**params, "max_threshold": 1.0}, label="test")
     assert none == "" and ok.thresholds_.max() == 1.0
 
 
@@ -166,14 +184,14 @@ def test_a_default_fit_whose_plays_reach_the_span_is_refitted_for_the_inverse() 
     u = 28.0 * np.sin(2 * np.pi * 0.1 * t + 0.5) + 30.0
     y = 0.9 * 28.0 * np.sin(2 * np.pi * 0.1 * (t - 0.9) + 0.5) + 30.0
     assert make_family("gamma").fit(u, y).thresholds_.max() >= np.ptp(u) * (1 - 1e-9)
-    model, note = compensate.fit_reachable("gamma", u, y, {}, label="lagged")
+    model, note = fit_reachable("gamma", u, y, {}, label="lagged")
     assert "reach the identification range" in note and "refitted with max_threshold=" in note
     assert model.thresholds_.max() <= 0.75 * float(np.ptp(u)) + 1e-9
 
 def test_quick_seed000_ours_is_not_worse_than_pd_on_the_virtual_rig(tmp_path: Path) -> None:
     cfg = _cfg(tmp_path, "tracking=off", "plots=false", "seed001.enabled=false",
                "seed002.enabled=false")
-    t5 = compensate.run(cfg)["seed000_tracking"].set_index("scheme")
+    t5 = compensate.stage(cfg).tables["seed000_tracking"].set_index("scheme")
     # the quick experiment identifies on 0..2 mm with plays configured up to 3 mm: refused,
     # refitted narrower, and then it tracks far better than PD (not 4x worse)
     assert "refitted with max_threshold" in t5.loc["ours", "note"]
@@ -181,22 +199,20 @@ def test_quick_seed000_ours_is_not_worse_than_pd_on_the_virtual_rig(tmp_path: Pa
 
 
 def test_shape_aware_model_is_trained_without_the_compensated_shapes() -> None:
-    from pipelines.schemas import Seed001Settings, with_defaults
-
     cfg = {"rig": "tsm-bench", "shapes": {"A": [90, 30], "B": [60, 60]},
            "curve_angles_deg": [30, 60, 90], "radii_mm": [30, 60], "model_input": "command",
            "shape_aware": {"family": "gamma", "params": {"constraint": "free",
                                                         "fit_offset": True, "max_threshold": 2.0},
                            "estimator": {"angle_degree": 2, "curvature_degree": 1}}}
-    cfg = with_defaults(Seed001Settings, cfg)  # the seed001 node run() passes
+    s1 = schemas.settings(Seed001Settings, cfg)  # the seed001 node run() passes
     _, u = stand_in_excitation("sine_decay", amplitudes_mm=[3.0, 1.5], periods_per_amplitude=2,
                                frequency_hz=0.5)
-    sa, trained = compensate.fit_shape_aware(cfg, BACKEND, u, seed=0, progress=False)
+    sa, trained = fit_shape_aware(s1, BACKEND, u, seed=0, progress_bar=False)
     assert trained == ["30/30", "30/60", "60/30", "90/60"]
     assert sa.shapes_.tolist() == [[30, 30], [30, 60], [60, 30], [90, 60]]
     # the stand-in's backlash grows with the angle: the model for shape A (never driven)
     # reproduces that rig's response to the identification input closely
     rig = StandInRig(rig="tsm-bench", curve_angle_deg=90, radius_mm=30)
-    y = compensate.drive(rig, u).column("output")
+    y = drive(rig, u).column("output")
     err = sa.predict(u, curve_angle_deg=90.0, radius_mm=30.0) - y
     assert np.sqrt(np.mean(err**2)) < 0.1 * np.sqrt(np.mean(y**2))

@@ -258,12 +258,12 @@ def test_state_column_continues_from_a_state_and_load_champion_gives_the_family(
 def test_compensation_takes_its_model_from_the_registry_when_configured(
         registered: dict[str, object]) -> None:
     from pipelines import compensate
+    from pipelines.compensation.settings import Seed001Ours
 
     tracker = registered["tracker"]
     uri = tracker.settings.tracking_uri  # type: ignore[attr-defined]
-    model = compensate._registry_model({"registry": "tsm", "registry_alias": registry.ALIAS,
-                                        "tracking_uri": uri},
-                                       "tsm-bench", 90.0, 30.0)
+    ours = Seed001Ours(registry="tsm", registry_alias=registry.ALIAS)
+    model = compensate.registry_model(ours, "tsm-bench", 90.0, 30.0, tracking_uri=uri)
     champ = registry.champion_table(tracker).set_index("name").loc["tsm.tsm-bench_phi090_r030"]
     assert model.to_dict()["family"] == champ["family"]
     fits = registered["fits"]
@@ -273,6 +273,4 @@ def test_compensation_takes_its_model_from_the_registry_when_configured(
     u = np.linspace(-3.0, 3.0, 50)
     assert np.array_equal(model.predict(u), own.predict(u))
     with pytest.raises(registry.RegistryError):  # shape B was never registered here
-        compensate._registry_model({"registry": "tsm", "registry_alias": registry.ALIAS,
-                                    "tracking_uri": uri},
-                                   "tsm-bench", 60.0, 60.0)
+        compensate.registry_model(ours, "tsm-bench", 60.0, 60.0, tracking_uri=uri)
