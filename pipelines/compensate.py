@@ -16,7 +16,7 @@ papers' schemes on the same plant and the same desired trajectories:
   stroke segment, PD vs AME-PD tracking eq. 32.
 
 This module is the stage's edge; the experiments are the package :mod:`pipelines.compensation`.
-:func:`stage` = typed settings (``schemas.settings(CompensateConfig, cfg)``) -> :func:`run`
+:data:`STAGE` (the shared skeleton, :mod:`pipelines.skeleton`) = typed settings -> :func:`run`
 (the pure core :func:`pipelines.compensation.experiments.run`: tables, figures, headline
 numbers; plus seed 001's registered models when asked for) -> :func:`write` -> :func:`track`.
 Outputs (atomic): ``<out_dir>/*.parquet`` (tidy tables), ``<out_dir>/plots/*.png``, the report
@@ -36,14 +36,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pipelines import schemas
-from pipelines.common import run_stage
 from pipelines.compensation import experiments
 from pipelines.compensation.report_section import report_text
 from pipelines.compensation.result import CompensationResult
 from pipelines.compensation.rig import RigBackend
 from pipelines.compensation.seed001 import Champion
 from pipelines.compensation.settings import CompensateConfig, Seed001Ours
+from pipelines.skeleton import Stage, TrackContext
 from rig_io.atomic import atomic_path, clean_leftovers, contained, write_text_atomic
 
 __all__ = ["champion_loader", "output_files", "registry_model", "run", "stage", "track",
@@ -173,35 +172,31 @@ def track(tracker: Any, result: CompensationResult, settings: CompensateConfig) 
 # ---------------------------------------------------------------------------------------------
 # The stage
 # ---------------------------------------------------------------------------------------------
-def stage(cfg: Any, *, backend: RigBackend | None = None) -> CompensationResult:
-    """The whole stage on a composed config, a hand-written mapping or a
-    :class:`CompensateConfig`: run the enabled experiments, write, track; returns the result."""
-    from pipelines.tracking import stage_tracker
-
-    settings = schemas.settings(CompensateConfig, cfg)
+def _run_and_write(settings: CompensateConfig, *,
+                   backend: RigBackend | None = None) -> CompensationResult:
     result = run(settings, backend=backend)
     write(result, settings)
-    tracker = stage_tracker({"tracking": settings.tracking, "paths": settings.paths})
-    if tracker is not None:
-        track(tracker, result, settings)
+    for name, frame in result.tables.items():
+        log.info("%s: %d rows", name, len(frame))
     return result
 
 
-def _main() -> None:
-    import hydra
-    from omegaconf import DictConfig
+def _track(ctx: TrackContext, settings: CompensateConfig, result: CompensationResult) -> None:
+    track(ctx.tracker, result, settings)
 
-    @hydra.main(config_path="../conf", config_name="compensate", version_base="1.3")
-    def main(cfg: DictConfig) -> None:
-        result = run_stage("compensate", lambda: stage(cfg))
-        for name, frame in result.tables.items():
-            log.info("%s: %d rows", name, len(frame))
 
-    main()
+STAGE = Stage("compensate", CompensateConfig, run=_run_and_write, track=_track)
+
+
+def stage(cfg: Any, *, backend: RigBackend | None = None) -> CompensationResult:
+    """The whole stage on a composed config, a hand-written mapping or a
+    :class:`CompensateConfig`: run the enabled experiments, write, track; returns the result.
+    ``backend``: another plant than the virtual rig (tests)."""
+    if backend is None:
+        return STAGE.execute(cfg)
+    return dataclasses.replace(
+        STAGE, run=functools.partial(_run_and_write, backend=backend)).execute(cfg)
 
 
 if __name__ == "__main__":
-    from pipelines.cli import guard
-
-    guard("compensate")
-    _main()
+    STAGE.main()

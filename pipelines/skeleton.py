@@ -45,11 +45,11 @@ R = TypeVar("R")
 
 
 def tracker_for(settings: Any) -> Any:
-    """The MLflow tracker of a stage's settings: its ``tracking`` group (None or
-    ``enabled: false`` = off) with the store under ``paths.root``."""
+    """The MLflow tracker of a stage's settings: its ``tracking`` group (not given, as in a
+    hand-written config, or ``enabled: false`` = off) with the store under ``paths.root``."""
     from pipelines import tracking
 
-    group = settings.tracking if isinstance(settings.tracking, Mapping) else {}
+    group = settings.tracking if isinstance(settings.tracking, Mapping) else {"enabled": False}
     root = Paths.from_config(settings.paths).root
     return tracking.Tracker(tracking.settings_from_config(group, root=root))
 
