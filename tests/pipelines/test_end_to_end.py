@@ -22,19 +22,8 @@ def _listed(stage: str, overrides: list[str]) -> str:
     return f"overrides.{stage}=[{','.join(repr(o) for o in overrides)}]"
 
 
-def test_small_pipeline_end_to_end_and_incremental_rerun(tmp_path: Path) -> None:
-    mlflow_store(tmp_path)
-    cfg = compose_stage("pipeline", [
-        f"paths.root={tmp_path}", "n_jobs=1", "progress=false",
-        _listed("generate", ["campaign=quick", "n_jobs=1", "progress=false", *SHORT]),
-        _listed("ingest", ["progress=false"]),
-        _listed("fit", ["families=[linear,gamma]"]),
-        _listed("report", ["plots.dpi=40"]),
-    ])
-    first = run_pipeline(cfg)
-    assert first.generate_report is not None and len(first.generate_report["written"]) == 10
-    assert first.ingest_report is not None and first.ingest_report["n_rejected"] == 0
-    reports = tmp_path / "data" / "reports"
+def _check_first_outputs(reports: Path) -> pd.DataFrame:
+    """The tables, report and timings of the first run; returns its metrics."""
     metrics = pd.read_parquet(reports / "metrics.parquet")
     # 2 families x 2 configurations x (fit + 4 held-out excitations, two evaluation-only)
     assert len(metrics) == 20
@@ -62,6 +51,24 @@ def test_small_pipeline_end_to_end_and_incremental_rerun(tmp_path: Path) -> None
             "total"} <= set(timing)
     # two configurations: too few to leave one out (needs 3), so an empty table, no error
     assert pd.read_parquet(reports / "unseen_shape.parquet").empty
+
+    return metrics
+
+
+def test_small_pipeline_end_to_end_and_incremental_rerun(tmp_path: Path) -> None:
+    mlflow_store(tmp_path)
+    cfg = compose_stage("pipeline", [
+        f"paths.root={tmp_path}", "n_jobs=1", "progress=false",
+        _listed("generate", ["campaign=quick", "n_jobs=1", "progress=false", *SHORT]),
+        _listed("ingest", ["progress=false"]),
+        _listed("fit", ["families=[linear,gamma]"]),
+        _listed("report", ["plots.dpi=40"]),
+    ])
+    first = run_pipeline(cfg)
+    assert first.generate_report is not None and len(first.generate_report["written"]) == 10
+    assert first.ingest_report is not None and first.ingest_report["n_rejected"] == 0
+    reports = tmp_path / "data" / "reports"
+    metrics = _check_first_outputs(reports)
 
     client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
     exp = client.get_experiment_by_name("tsm-hysteresis")

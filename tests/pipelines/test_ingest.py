@@ -100,6 +100,27 @@ def test_same_run_in_every_container_gives_the_same_dataset(tmp_path: Path) -> N
             metas["folder"]["camera_latency_ms"], abs=1e-6)
 
 
+def _bad_bags(src: Path) -> dict[str, str]:
+    """One truncated or corrupt bag of each storage; returns {source name: expected words}."""
+    expect: dict[str, str] = {}
+    b = write_bag(_run("tbag"), src / "tbag.bag", storage="rosbag1")
+    b.write_bytes(b.read_bytes()[:5000])
+    expect["tbag.bag"] = "truncated or corrupt bag"
+
+    b = write_bag(_run("cbag"), src / "cbag", storage="sqlite3")
+    db = b / "cbag.db3"
+    data = bytearray(db.read_bytes())
+    data[0:100] = b"\x13" * 100
+    db.write_bytes(bytes(data))
+    expect["cbag"] = "truncated or corrupt bag"
+
+    b = write_bag(_run("mbag"), src / "mbag", storage="mcap")
+    data = (b / "mbag.mcap").read_bytes()
+    (b / "mbag.mcap").write_bytes(data[: len(data) // 3])
+    expect["mbag"] = "truncated or corrupt bag"
+    return expect
+
+
 def _bad_batch(src: Path) -> dict[str, str]:
     """Good runs plus one run per bad case; returns {source name: expected words}."""
     write_run_folder(_run("good_1", seed=1), src)
@@ -156,21 +177,7 @@ def _bad_batch(src: Path) -> dict[str, str]:
     write_run_folder(run, src)
     expect["blind"] = "no confident frame"
 
-    b = write_bag(_run("tbag"), src / "tbag.bag", storage="rosbag1")
-    b.write_bytes(b.read_bytes()[:5000])
-    expect["tbag.bag"] = "truncated or corrupt bag"
-
-    b = write_bag(_run("cbag"), src / "cbag", storage="sqlite3")
-    db = b / "cbag.db3"
-    data = bytearray(db.read_bytes())
-    data[0:100] = b"\x13" * 100
-    db.write_bytes(bytes(data))
-    expect["cbag"] = "truncated or corrupt bag"
-
-    b = write_bag(_run("mbag"), src / "mbag", storage="mcap")
-    data = (b / "mbag.mcap").read_bytes()
-    (b / "mbag.mcap").write_bytes(data[: len(data) // 3])
-    expect["mbag"] = "truncated or corrupt bag"
+    expect.update(_bad_bags(src))
     return expect
 
 
