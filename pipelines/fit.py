@@ -5,9 +5,8 @@ identification excitation (default ``sine_decay``) of the processed dataset.
     python -m pipelines.fit family=gamma config.curve_angle_deg=90
     python -m pipelines.fit -m family=gamma,bouc_wen config.curve_angle_deg=15,90
 
-Fitted models are written as JSON to ``${paths.models}/<family>/<configuration>__<kind>.json``
-(with the content key that produced them); a model whose data, configuration and family code
-are unchanged is read back instead of being fitted again.
+What it reads, writes and keeps: :mod:`pipelines.core.fit` (the core; this module is the
+command: settings, tracking).
 """
 
 from __future__ import annotations

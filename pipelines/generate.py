@@ -4,14 +4,8 @@
     python -m pipelines.generate format=mcap out=<dir>  # the same runs as rosbag2 (.mcap)
     python -m pipelines.generate campaign=quick effects=drift_only out=<dir>
 
-Each run is simulated by :func:`rig_io.virtual.simulate_run` and written by the format's own
-writers (:func:`rig_io.folder.write_run_folder`, :func:`rig_io.bag.write_bag`), atomically.
-Raw runs are never rewritten: a run that already exists with the same spec is skipped, a
-different spec under an existing run id is an error unless ``overwrite=true``. The specs and
-their hashes are recorded in ``<out>/campaign.json``: every spec as ``pending`` before any run
-is written, then ``done`` as each run lands, so a campaign killed at any point is completed by
-the same command (a run folder exists only whole, from the spec the book names). Temporaries
-of a killed writer are removed when the stage starts.
+What it reads, writes and keeps: :mod:`pipelines.core.generate` (the core; this module is the
+command: settings, tracking).
 """
 
 from __future__ import annotations

@@ -5,20 +5,8 @@
     python -m pipelines.ingest importer=tendon_catheter \\
         source=../shared/real-data/tendon-catheter out=data/processed/catheter
 
-Every run is read, checked, calibrated, synchronised and normalised by the pure functions of
-``rig_io``; a bad run is rejected with its reason while the others go through. A run whose
-source files, ingest version and options are unchanged is not processed again. Writes
-``<out>/samples/<run_id>.parquet``, ``<out>/runs.json`` and ``<out>/ingest_report.json``
-(all atomically; never anything in the source folder) and exits 1 when a run was rejected.
-
-``source`` may also be one run (a run folder, a ``.bag`` file or a rosbag2 folder): it is
-ingested alone, and nothing else in ``out`` is pruned. A source that does not exist, holds
-no run is refused (exit 2) and ``out`` is left untouched; one whose runs are all rejected
-writes only its ``ingest_report.json`` (``refused``, exit 1). An empty or wrong source never
-deletes processed data. An output that cannot be written (a full disk) stops the stage with
-one line naming the file and the free space (exit 2): nothing is pruned or removed. A
-processed file that no longer matches the hash recorded when it was written (truncated,
-edited) is processed again.
+What it reads, writes and keeps: :mod:`pipelines.core.ingest` (the core; this module is the
+command: settings, tracking).
 """
 
 from __future__ import annotations

@@ -3,11 +3,8 @@ configuration, plots, and a static report (``report.md`` + ``report.html``).
 
     python -m pipelines.report
 
-Reads only the other stages' outputs: ``metrics.parquet``, the model files and the
-predictions files. Writes under ``${paths.reports}``: ``gamma_weights.parquet|csv``,
-``leaderboard.parquet|csv``, ``family_summary.csv``, ``generalisation.csv`` (held-out /
-in-sample RMSE per family and excitation), ``plots/*.png``, ``report.md``,
-``report.html``. Nothing is redrawn when its inputs are unchanged (``report_key.json``).
+What it reads, writes and keeps: :mod:`pipelines.core.report` (the core; this module is the
+command: settings, tracking).
 """
 
 from __future__ import annotations

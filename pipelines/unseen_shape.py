@@ -3,19 +3,8 @@
     python -m pipelines.unseen_shape
     python -m pipelines.unseen_shape families=[gamma] estimator.method=rbf
 
-Leave-one-configuration-out over every configuration of the rig: for each configuration and
-family, three predictors score the configuration's evaluation runs (``eval_excitations``):
-
-* ``own``: the configuration's own model (identified on its own record: the reference);
-* ``nearest``: the model of the nearest other configuration (scaled wrap angle x curvature);
-* ``shape_aware``: :class:`hysteresis.shape_aware.ShapeAwareModel` fitted on the models of
-  every *other* configuration, asked for this one.
-
-Writes ``${paths.reports}/unseen_shape.parquet`` (columns :data:`COLUMNS`, one row per family x
-configuration x predictor), ``unseen_shape_summary.csv`` (per family: median RMSE of each
-predictor, the shape-aware / own ratio, in how many configurations shape-aware beats nearest,
-whether the targets hold) and ``plots/unseen_shape.png``; reads only the fit stage's model
-files and the processed dataset. Nothing is recomputed when its inputs are unchanged.
+What it reads, writes and keeps: :mod:`pipelines.core.unseen_shape` (the core; this module is the
+command: settings, tracking).
 """
 
 from __future__ import annotations

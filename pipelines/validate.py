@@ -3,11 +3,8 @@
     python -m pipelines.validate
     python -m pipelines.validate cross=true            # the full cross-excitation matrix
 
-Metrics for every (family, configuration, fit excitation, evaluation excitation) go to
-``${paths.reports}/metrics.parquet`` and ``metrics.csv`` (columns
-:data:`pipelines.stages.METRICS_COLUMNS`); the predictions, one parquet file per
-configuration under ``${paths.predictions}``, feed the report's plots. A configuration whose
-models and data are unchanged is read back from its predictions file instead of recomputed.
+What it reads, writes and keeps: :mod:`pipelines.core.validate` (the core; this module is the
+command: settings, tracking).
 """
 
 from __future__ import annotations

@@ -75,7 +75,7 @@ def discover(root: str | os.PathLike[str], *,
         for p in sorted(folder.iterdir()):
             if p.name.startswith("."):
                 continue
-            source = _source_at(p, mapping)
+            source = source_at(p, mapping)
             if source is not None:
                 found.append(source)
             elif p.is_dir():
@@ -98,7 +98,7 @@ def _check_source_root(root: Path) -> None:
                          file=str(root))
 
 
-def _source_at(p: Path, mapping: dict[str, Any] | None) -> Source | None:
+def source_at(p: Path, mapping: dict[str, Any] | None = None) -> Source | None:
     """The run at ``p`` (a rosbag2 or run folder, a rosbag1, a mapped foreign file), or None
     (a folder to search further, or a file that is no run)."""
     if p.is_dir():

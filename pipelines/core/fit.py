@@ -1,12 +1,5 @@
 """The core of stage ``fit`` (no Hydra, no MLflow; its command
-is :mod:`pipelines.fit`).
-
-Stage ``fit``: every model family x every configuration, identified on the
-identification excitation (default ``sine_decay``) of the processed dataset.
-
-    python -m pipelines.fit
-    python -m pipelines.fit family=gamma config.curve_angle_deg=90
-    python -m pipelines.fit -m family=gamma,bouc_wen config.curve_angle_deg=15,90
+is :mod:`pipelines.fit`; the command line is in its docstring).
 
 Fitted models are written as JSON to ``${paths.models}/<family>/<configuration>__<kind>.json``
 (with the content key that produced them); a model whose data, configuration and family code

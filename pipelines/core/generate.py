@@ -1,11 +1,5 @@
 """The core of stage ``generate`` (no Hydra, no MLflow; its command
-is :mod:`pipelines.generate`).
-
-Stage ``generate`` (``make data``): the virtual rig writes a campaign of raw runs.
-
-    python -m pipelines.generate                        # 72 standard runs -> data/raw/virtual
-    python -m pipelines.generate format=mcap out=<dir>  # the same runs as rosbag2 (.mcap)
-    python -m pipelines.generate campaign=quick effects=drift_only out=<dir>
+is :mod:`pipelines.generate`; the command line is in its docstring).
 
 Each run is simulated by :func:`rig_io.virtual.simulate_run` and written by the format's own
 writers (:func:`rig_io.folder.write_run_folder`, :func:`rig_io.bag.write_bag`), atomically.

@@ -1,12 +1,5 @@
 """The core of stage ``ingest`` (no Hydra, no MLflow; its command
-is :mod:`pipelines.ingest`).
-
-Stage ``ingest``: raw rig runs (folders, bags, foreign logs) -> validated parquet dataset.
-
-    python -m pipelines.ingest                # data/raw/virtual -> data/processed/virtual
-    python -m pipelines.ingest source=<dir> out=<dir>
-    python -m pipelines.ingest importer=tendon_catheter \\
-        source=../shared/real-data/tendon-catheter out=data/processed/catheter
+is :mod:`pipelines.ingest`; the command line is in its docstring).
 
 Every run is read, checked, calibrated, synchronised and normalised by the pure functions of
 ``rig_io``; a bad run is rejected with its reason while the others go through. A run whose
@@ -40,13 +33,12 @@ from typing import Any
 from tqdm import tqdm
 
 from rig_io.atomic import clean_leftovers, write_text_atomic
-from rig_io.bag import sidecar_manifest
 from rig_io.dataset import REPORT, SAMPLES, read_runs, run_file, write_run_rows, write_runs
 from rig_io.errors import RigIOError, WriteError
-from rig_io.importer import IMPORTER_VERSION, load_mapping, matches
+from rig_io.importer import IMPORTER_VERSION, load_mapping
 from rig_io.limits import ReadLimits
 from rig_io.process import INGEST_VERSION, process_run
-from rig_io.sources import Source, _looks_like_run_folder, discover, hash_files, load
+from rig_io.sources import Source, discover, hash_files, load, source_at
 from rig_io.synchronise import SyncOptions
 
 
@@ -213,23 +205,12 @@ class _Batch:
 
 def single_run_source(path: Path, *, mapping: dict[str, Any] | None = None) -> Source | None:
     """``path`` as one raw run (run folder, ``.bag``, rosbag2 folder, importable log), or
-    None when it is a folder of runs."""
-    if path.is_dir():
-        if (path / "metadata.yaml").exists():
-            files = sorted(f for f in path.iterdir() if f.is_file())
-            side = sidecar_manifest(path)
-            return Source("rosbag2", path, tuple(files + ([side] if side.exists() else [])))
-        if _looks_like_run_folder(path):
-            return Source("folder", path, tuple(sorted(
-                f for f in path.iterdir() if f.is_file() and not f.name.startswith("."))))
-        return None
-    if path.suffix == ".bag":
-        side = sidecar_manifest(path)
-        return Source("rosbag1", path, (path, side) if side.exists() else (path,))
-    if mapping is not None and matches(mapping, path):
-        return Source("import", path, (path,))
-    raise RigIOError("source is a file that is neither a .bag nor matched by the importer "
-                     "mapping; pass the folder holding the runs", file=str(path))
+    None when it is a folder of runs; a file that is none of these is refused."""
+    source = source_at(path, mapping)
+    if source is None and not path.is_dir():
+        raise RigIOError("source is a file that is neither a .bag nor matched by the importer "
+                         "mapping; pass the folder holding the runs", file=str(path))
+    return source
 
 
 def file_sha256(path: Path) -> str:

@@ -1,10 +1,5 @@
 """The core of stage ``report`` (no Hydra, no MLflow; its command
-is :mod:`pipelines.report`).
-
-Stage ``report``: the seed 001 Table 4.1 equivalent, a leaderboard of families per
-configuration, plots, and a static report (``report.md`` + ``report.html``).
-
-    python -m pipelines.report
+is :mod:`pipelines.report`; the command line is in its docstring).
 
 Reads only the other stages' outputs: ``metrics.parquet``, the model files and the
 predictions files. Writes under ``${paths.reports}``: ``gamma_weights.parquet|csv``,

@@ -1,10 +1,5 @@
 """The core of stage ``unseen_shape`` (no Hydra, no MLflow; its command
-is :mod:`pipelines.unseen_shape`).
-
-Stage ``unseen_shape``: can a family predict a sheath shape it was never fitted on?
-
-    python -m pipelines.unseen_shape
-    python -m pipelines.unseen_shape families=[gamma] estimator.method=rbf
+is :mod:`pipelines.unseen_shape`; the command line is in its docstring).
 
 Leave-one-configuration-out over every configuration of the rig: for each configuration and
 family, three predictors score the configuration's evaluation runs (``eval_excitations``):

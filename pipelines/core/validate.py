@@ -1,10 +1,5 @@
 """The core of stage ``validate`` (no Hydra, no MLflow; its command
-is :mod:`pipelines.validate`).
-
-Stage ``validate``: every fitted model predicts the runs of its own configuration.
-
-    python -m pipelines.validate
-    python -m pipelines.validate cross=true            # the full cross-excitation matrix
+is :mod:`pipelines.validate`; the command line is in its docstring).
 
 Metrics for every (family, configuration, fit excitation, evaluation excitation) go to
 ``${paths.reports}/metrics.parquet`` and ``metrics.csv`` (columns

@@ -268,12 +268,7 @@ def _sliding_follower(x_in: float, u_out: float, overshoot: float, sgn: float, m
     """The follower's new position once it slides (the spring rate makes the tension move);
     ``work``/``wsv`` hold the tensions and stretches there. ``overshoot``: the input's move
     left after the held tendon took its stretch."""
-    tref = p[P_TREF]
-    tc = p[P_TC]
-    ts = p[P_TS]
-    f0 = p[P_F0]
-    kf = p[P_KF]
-    ff = p[P_FF]
+    f0, kf, ff = p[P_F0], p[P_KF], p[P_FF]
     lo = u_out
     hi = u_out + overshoot  # stretch only grows when pulling: this overshoots
     if kf > 0.0:
@@ -281,7 +276,7 @@ def _sliding_follower(x_in: float, u_out: float, overshoot: float, sgn: float, m
     for _ in range(100):
         mid = hi if kf == 0.0 else 0.5 * (lo + hi)
         _backward(f0 + kf * mid + sgn * ff, sgn, mu, work, theta, cont)
-        s_new = _fill(work, wsv, coef, tref, tc, ts)
+        s_new = _fill(work, wsv, coef, p[P_TREF], p[P_TC], p[P_TS])
         if kf == 0.0:
             hi = x_in - s_new
             break
@@ -294,7 +289,7 @@ def _sliding_follower(x_in: float, u_out: float, overshoot: float, sgn: float, m
     u_new = hi
     if kf != 0.0:
         _backward(f0 + kf * u_new + sgn * ff, sgn, mu, work, theta, cont)
-        _fill(work, wsv, coef, tref, tc, ts)
+        _fill(work, wsv, coef, p[P_TREF], p[P_TC], p[P_TS])
     return u_new
 
 
