@@ -15,7 +15,7 @@ import json
 import logging
 import re
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -92,63 +92,11 @@ class Doc:
         return "" if v is None or v is pd.NA else str(v)
 
     def markdown(self) -> str:
-        out: list[str] = []
-        for kind, data in self.blocks:
-            if kind == "h":
-                out.append(f"{'#' * data[0]} {data[1]}\n")
-            elif kind == "p":
-                out.append(f"{data}\n")
-            elif kind == "headline":
-                out.append(f"**{data}**\n")
-            elif kind == "table":
-                frame, fmt = data
-                cols = [str(c) for c in frame.columns]
-                out.append("| " + " | ".join(cols) + " |")
-                out.append("|" + "|".join("---" for _ in cols) + "|")
-                for row in frame.itertuples(index=False):
-                    out.append("| " + " | ".join(self._cell(v, fmt) for v in row) + " |")
-                out.append("")
-            elif kind == "img":
-                out.append(f"![{data[1]}]({data[0]})\n\n*{data[1]}*\n")
-            elif kind == "links":
-                out.append("\n".join(f"- [{t}]({p})" for t, p in data) + "\n")
-            elif kind == "thumbs":
-                out.append(" ".join(f'<a href="{p}"><img src="{p}" width="240" alt="{t}" '
-                                    f'title="{t}"></a>' for t, p in data) + "\n")
-                out.append("\n".join(f"- [{t}]({p})" for t, p in data) + "\n")
-        return "\n".join(out)
+        return "\n".join(line for kind, data in self.blocks for line in _MARKDOWN[kind](data))
 
     def html(self, title: str) -> str:
-        body: list[str] = []
         esc = html.escape
-        for kind, data in self.blocks:
-            if kind == "h":
-                body.append(f"<h{data[0]}>{_inline_html(esc(data[1]))}</h{data[0]}>")
-            elif kind == "p":
-                body.append(f"<p>{_inline_html(esc(data))}</p>")
-            elif kind == "headline":
-                body.append(f'<p class="headline" id="headline"><strong>{esc(data)}</strong>'
-                            "</p>")
-            elif kind == "table":
-                frame, fmt = data
-                head = "".join(f"<th>{esc(str(c))}</th>" for c in frame.columns)
-                rows = "".join(
-                    "<tr>" + "".join(f"<td>{esc(self._cell(v, fmt))}</td>" for v in row)
-                    + "</tr>" for row in frame.itertuples(index=False))
-                body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody>"
-                            "</table>")
-            elif kind == "img":
-                body.append(f'<figure><img src="{esc(data[0])}" alt="{esc(data[1])}">'
-                            f"<figcaption>{esc(data[1])}</figcaption></figure>")
-            elif kind == "links":
-                items = "".join(f'<li><a href="{esc(p)}">{esc(t)}</a></li>' for t, p in data)
-                body.append(f"<ul>{items}</ul>")
-            elif kind == "thumbs":
-                items = "".join(
-                    f'<figure class="thumb"><a href="{esc(p)}"><img src="{esc(p)}" '
-                    f'alt="{esc(t)}" loading="lazy"></a><figcaption>{esc(t)}</figcaption>'
-                    "</figure>" for t, p in data)
-                body.append(f'<div class="thumbs">{items}</div>')
+        body = [_HTML[kind](data) for kind, data in self.blocks]
         style = ("body{font-family:sans-serif;max-width:1200px;margin:auto;padding:1em}"
                  "table{border-collapse:collapse;font-size:12px;margin:0.5em 0}"
                  "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}"
@@ -158,6 +106,65 @@ class Doc:
                  ".headline{font-size:1.25em}")
         return (f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}"
                 f"</title><style>{style}</style></head><body>{''.join(body)}</body></html>\n")
+
+
+def _md_table(data: tuple[pd.DataFrame, str]) -> list[str]:
+    frame, fmt = data
+    cols = [str(c) for c in frame.columns]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
+    lines += ["| " + " | ".join(Doc._cell(v, fmt) for v in row) + " |"
+              for row in frame.itertuples(index=False)]
+    return [*lines, ""]
+
+
+def _md_thumbs(data: list[tuple[str, str]]) -> list[str]:
+    return [" ".join(f'<a href="{p}"><img src="{p}" width="240" alt="{t}" title="{t}"></a>'
+                     for t, p in data) + "\n",
+            "\n".join(f"- [{t}]({p})" for t, p in data) + "\n"]
+
+
+#: Each block kind as Markdown lines.
+_MARKDOWN: dict[str, Callable[[Any], list[str]]] = {
+    "h": lambda d: [f"{'#' * d[0]} {d[1]}\n"],
+    "p": lambda d: [f"{d}\n"],
+    "headline": lambda d: [f"**{d}**\n"],
+    "table": _md_table,
+    "img": lambda d: [f"![{d[1]}]({d[0]})\n\n*{d[1]}*\n"],
+    "links": lambda d: ["\n".join(f"- [{t}]({p})" for t, p in d) + "\n"],
+    "thumbs": _md_thumbs,
+}
+
+
+def _html_table(data: tuple[pd.DataFrame, str]) -> str:
+    esc = html.escape
+    frame, fmt = data
+    head = "".join(f"<th>{esc(str(c))}</th>" for c in frame.columns)
+    rows = "".join("<tr>" + "".join(f"<td>{esc(Doc._cell(v, fmt))}</td>" for v in row)
+                   + "</tr>" for row in frame.itertuples(index=False))
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>"
+
+
+def _html_thumbs(data: list[tuple[str, str]]) -> str:
+    esc = html.escape
+    items = "".join(f'<figure class="thumb"><a href="{esc(p)}"><img src="{esc(p)}" '
+                    f'alt="{esc(t)}" loading="lazy"></a><figcaption>{esc(t)}</figcaption>'
+                    "</figure>" for t, p in data)
+    return f'<div class="thumbs">{items}</div>'
+
+
+#: Each block kind as HTML.
+_HTML: dict[str, Callable[[Any], str]] = {
+    "h": lambda d: f"<h{d[0]}>{_inline_html(html.escape(d[1]))}</h{d[0]}>",
+    "p": lambda d: f"<p>{_inline_html(html.escape(d))}</p>",
+    "headline": lambda d: (f'<p class="headline" id="headline"><strong>{html.escape(d)}'
+                           "</strong></p>"),
+    "table": _html_table,
+    "img": lambda d: (f'<figure><img src="{html.escape(d[0])}" alt="{html.escape(d[1])}">'
+                      f"<figcaption>{html.escape(d[1])}</figcaption></figure>"),
+    "links": lambda d: "<ul>" + "".join(f'<li><a href="{html.escape(p)}">{html.escape(t)}'
+                                        "</a></li>" for t, p in d) + "</ul>",
+    "thumbs": _html_thumbs,
+}
 
 
 def _inline_html(text: str) -> str:
