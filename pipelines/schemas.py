@@ -70,8 +70,11 @@ class ConfigurationSelection:
     """Which configurations a stage works on: each field null = every one in the dataset,
     a value or a list narrows it (``config.curve_angle_deg=[15,90]``)."""
 
+    #: Rig(s) worked on (the dataset's ``rig`` column, e.g. tsm-bench).
     rig: Any = None
+    #: Sheath curve angle(s) worked on, deg.
     curve_angle_deg: Any = None
+    #: Sheath curve radius (or radii) worked on, mm.
     radius_mm: Any = None
 
 
@@ -79,7 +82,10 @@ class ConfigurationSelection:
 class Signals:
     """Dataset columns used as model input u and output y."""
 
+    #: Processed-dataset column read as the model input u (``input``: mm of pull or deg of motor
+    #: angle; ``input_norm``: scaled to [-1, 1]).
     input: str = "input"
+    #: Processed-dataset column read as the model output y (``output`` or ``output_norm``).
     output: str = "output"
 
 
@@ -87,10 +93,14 @@ class Signals:
 class GenerateConfig:
     """``conf/generate.yaml``: the virtual rig writes a campaign of raw runs."""
 
+    #: Group conf/paths/: the project's data folders (``out`` is its raw folder).
     paths: Any = MISSING
-    #: Groups conf/rig/, conf/campaign/ and conf/effects/ (the strength of each effect).
+    #: Group conf/rig/: the virtual rig simulated (its name, physical parameters and sensors).
     rig: Any = MISSING
+    #: Group conf/campaign/: the runs written (seed, curve angles x radii, excitations).
     campaign: Any = MISSING
+    #: Group conf/effects/: the strength of each physical effect (0 = off, 1 = nominal;
+    #: docs/virtual-rig.md).
     effects: Any = MISSING
     #: The campaign's folder (``${paths.raw}``).
     out: str = MISSING
@@ -104,6 +114,7 @@ class GenerateConfig:
     #: Rewrite a run whose id exists with a different spec (otherwise an error: raw runs are
     #: never rewritten; one with the same spec is always left alone).
     overwrite: bool = False
+    #: A progress bar (tqdm, on stderr) over the runs written.
     progress: bool = True
 
 
@@ -111,6 +122,8 @@ class GenerateConfig:
 class IngestConfig:
     """``conf/ingest.yaml``: raw runs -> validated parquet dataset."""
 
+    #: Group conf/paths/: the project's data folders (``source`` and ``out`` are its raw and
+    #: processed folders).
     paths: Any = MISSING
     #: Group conf/importer/: a foreign-log mapping; null = tsm-rig-log/1 runs only.
     importer: Any = None
@@ -125,6 +138,7 @@ class IngestConfig:
     #: applied when ``source`` is one run, and a missing or empty source, or one whose runs
     #: are all rejected, is refused.
     prune: bool = True
+    #: A progress bar (tqdm, on stderr) over the runs ingested.
     progress: bool = True
     #: Synchronisation: camera latency search, Kalman filter (each knob's meaning is in
     #: SyncOptions; ``sync.max_latency_ms=500``).
@@ -139,6 +153,8 @@ class IngestConfig:
 class TrackedStageConfig:
     """What fit, validate, unseen_shape and report share."""
 
+    #: Group conf/paths/: the project's data folders (processed, models, predictions, reports) the
+    #: stage reads and writes.
     paths: Any = MISSING
     #: Group conf/tracking/ (MLflow).
     tracking: Any = MISSING
@@ -166,6 +182,8 @@ class IdentificationConfig(TrackedStageConfig):
     #: identifies, this last fraction is held out as excitation ``<kind>.tail``.
     single_run_heldout_fraction: float = 0.3
     signals: Signals = field(default_factory=Signals)
+    #: Progress bars (tqdm, on stderr) while models are fitted or scored; false = none (fit then
+    #: logs each finished model).
     progress: bool = True
 
 
@@ -212,7 +230,10 @@ class UnseenShapeConfig(TrackedStageConfig):
     families: list[str] | None = None
     estimator: ShapeAwareEstimator = field(default_factory=ShapeAwareEstimator)
     signals: Signals = field(default_factory=Signals)
+    #: Write ``${paths.reports}/plots/unseen_shape.png`` (per family, each configuration's RMSE
+    #: under the three predictors).
     plot: bool = True
+    #: Resolution of that figure (dots per inch).
     dpi: int = 72
 
 
@@ -221,8 +242,11 @@ class ExemplaryShape:
     """The configuration the report shows in detail (seed 001 presents phi = 90 deg,
     r = 30 mm); when the data lacks it, the largest angle with the smallest radius."""
 
+    #: Its rig (the dataset's ``rig`` column).
     rig: str | None = "tsm-bench"
+    #: Its curve angle, deg (null: a configuration recorded without one).
     curve_angle_deg: float | None = 90.0
+    #: Its curve radius, mm (null: a configuration recorded without one).
     radius_mm: float | None = 30.0
 
 
@@ -232,6 +256,7 @@ class ReportPlots:
 
     #: One figure per configuration (all families overlaid).
     per_configuration: bool = True
+    #: Resolution of the report's figures (dots per inch).
     dpi: int = 72
     #: Time series are thinned to this many points per line.
     max_points: int = 1500
@@ -442,11 +467,22 @@ class StageOverrides:
     """Extra Hydra overrides per stage of ``run_all`` (lists of "key=value"), e.g.
     ``"overrides.fit=['+family_overrides.bouc_wen.n_starts=2']"`` (each element quoted)."""
 
+    #: Overrides of generate (conf/generate.yaml), applied after the pipeline's paths.
     generate: list[str] = field(default_factory=list)
+    #: Overrides of ingest (conf/ingest.yaml), applied after the pipeline's paths; with your own
+    #: data its source and importer win.
     ingest: list[str] = field(default_factory=list)
+    #: Overrides of fit (conf/fit.yaml); the settings the pipeline shares with fit (config, signals,
+    #: n_jobs, ...) replace theirs.
     fit: list[str] = field(default_factory=list)
+    #: Overrides of validate (conf/validate.yaml); the settings the pipeline shares with validate
+    #: (heldout, cross, ...) replace theirs.
     validate: list[str] = field(default_factory=list)
+    #: Overrides of unseen_shape (conf/unseen_shape.yaml); the settings the pipeline shares with it
+    #: (config, held-out kinds, ...) replace theirs.
     unseen_shape: list[str] = field(default_factory=list)
+    #: Overrides of report (conf/report.yaml); the pipeline's paths, tracking, n_jobs, cache and
+    #: identification excitation replace theirs.
     report: list[str] = field(default_factory=list)
 
 

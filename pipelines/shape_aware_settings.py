@@ -17,8 +17,15 @@ class ShapeAwareEstimator:
     theta^0..angle_degree x kappa^0..curvature_degree (``method: poly``) or a thin-plate
     spline (``method: rbf``)."""
 
+    #: ``poly`` (ridge regression on theta^a kappa^b) or ``rbf`` (thin-plate spline through the
+    #: training shapes).
     method: str = "poly"
+    #: Highest power of theta in the poly basis (capped by the number of training angles).
     angle_degree: int = 3
+    #: Highest power of kappa in the poly basis (capped by the number of training radii).
     curvature_degree: int = 1
+    #: Ridge penalty on the non-constant poly coefficients (features scaled to [0, 1]); 0 = plain
+    #: least squares.
     ridge: float = 1.0e-3
+    #: Smoothing of the rbf interpolant; 0 = exact interpolation.
     rbf_smoothing: float = 0.0

@@ -33,9 +33,10 @@ FloatArray = npt.NDArray[np.float64]
 class SyncOptions:
     """Knobs of synchronisation (``conf/ingest.yaml`` -> ``sync``)."""
 
-    #: Latency search window for the camera (ms) and its resolution (cross-correlation
-    #: against the tracker or encoder).
+    #: Largest camera latency searched (ms): cross-correlation of the frames against the tracker or
+    #: encoder.
     max_latency_ms: float = 300.0
+    #: Step between the latencies tried (ms); the best is refined by a parabola through the peak.
     latency_step_ms: float = 1.0
     #: Below this |correlation| the estimate is not trusted and the manifest's nominal latency
     #: is used.
