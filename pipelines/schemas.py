@@ -495,7 +495,8 @@ class PipelineConfig(ValidateConfig):
     defaults): ``run_all.stage_config`` forwards config, fit_excitations, fit_runs,
     single_run_heldout_fraction, signals, n_jobs and cache to fit and validate, heldout and
     cross to validate, config, signals, n_jobs, cache and the held-out kinds to unseen_shape,
-    n_jobs and cache to report, progress to every stage."""
+    n_jobs and cache to report, progress to fit and validate (generate and ingest keep their
+    own, set through ``overrides``)."""
 
     #: The stages run, in this order (any subset of the default). With your own data
     #: (``importer`` or ``source`` set) ``generate`` is left out.
