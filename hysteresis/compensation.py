@@ -662,3 +662,15 @@ def run_inverse_with_error_correction(
         fh_log[k] = f_hat
     return LoopResult("ours" if correct else "exact_ff", _ticks(n, dt_s), yd, u, y, seen,
                       {"model_output": ymodel, "f_hat": fh_log})
+
+
+def with_lead_in(yd: np.ndarray, *, start: float, lead_s: float, dt_s: float) -> np.ndarray:
+    """Prepend a smooth move from the rig's rest value ``start`` to ``yd[0]`` over ``lead_s``
+    at the control period ``dt_s`` (the papers' motions start away from rest; statistics skip
+    this lead-in)."""
+    n = int(round(lead_s / dt_s))
+    if n <= 0:
+        return yd
+    x = np.arange(n) / n
+    ramp = start + (float(yd[0]) - start) * (3 * x**2 - 2 * x**3)
+    return np.concatenate([ramp, yd])

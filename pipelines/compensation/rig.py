@@ -77,17 +77,6 @@ def drive(rig: Any, command: Any) -> Recorder:
     return rec
 
 
-def with_lead_in(yd: np.ndarray, *, start: float, lead_s: float) -> np.ndarray:
-    """Prepend a smooth move from the rig's rest value ``start`` to ``yd[0]`` over ``lead_s``
-    (the papers' motions start away from rest; statistics skip this lead-in)."""
-    n = int(round(lead_s / DT_S))
-    if n <= 0:
-        return yd
-    x = np.arange(n) / n
-    ramp = start + (float(yd[0]) - start) * (3 * x**2 - 2 * x**3)
-    return np.concatenate([ramp, yd])
-
-
 def progress(items: list[Any], desc: str, enabled: bool) -> Iterable[Any]:
     if not enabled:
         return items

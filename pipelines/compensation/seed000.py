@@ -21,19 +21,12 @@ from hysteresis.compensation import (
     run_inverse_with_error_correction,
     seed000_target,
     segment_statistics,
+    with_lead_in,
 )
 from pipelines.compensation.figures import plot_reference_model, plot_runs
 from pipelines.compensation.models import fit_reachable
 from pipelines.compensation.result import Outcome
-from pipelines.compensation.rig import (
-    DT_S,
-    RigBackend,
-    drive,
-    fresh,
-    make_rig,
-    progress,
-    with_lead_in,
-)
+from pipelines.compensation.rig import DT_S, RigBackend, drive, fresh, make_rig, progress
 from pipelines.compensation.settings import Seed000Settings
 from pipelines.compensation.tables import command_travel
 
@@ -114,7 +107,7 @@ def tracking_runs(s: Seed000Settings, rig: Any, ref: ColemanHodgdonModel, id_rec
     tr = s.tracking
     t = np.arange(0.0, float(tr.duration_s), DT_S)
     rest = float(rig.reset().get(s.angle_key, 0.0))
-    yd = with_lead_in(seed000_target(t), start=rest, lead_s=float(tr.lead_in_s))
+    yd = with_lead_in(seed000_target(t), start=rest, lead_s=float(tr.lead_in_s), dt_s=DT_S)
     stroke = StrokeLimits(*map(float, s.stroke))
     common = dict(dt_s=DT_S, kp=float(tr.kp), kd=float(tr.kd), stroke=stroke, camera=cam,
                   control_every=int(tr.control_every), output_key=s.angle_key,

@@ -19,19 +19,12 @@ from hysteresis.compensation import (
     run_open_loop,
     run_vision_feedback,
     seed002_motion,
+    with_lead_in,
 )
 from pipelines.compensation.figures import plot_runs
 from pipelines.compensation.models import fit_family, fit_reachable
 from pipelines.compensation.result import Outcome
-from pipelines.compensation.rig import (
-    DT_S,
-    RigBackend,
-    drive,
-    fresh,
-    make_rig,
-    progress,
-    with_lead_in,
-)
+from pipelines.compensation.rig import DT_S, RigBackend, drive, fresh, make_rig, progress
 from pipelines.compensation.settings import Seed002Case, Seed002Settings
 from pipelines.compensation.tables import stats_row
 
@@ -131,7 +124,7 @@ def run_trial(s: Seed002Settings, trial: Trial, out: Outcome,
     for sig, omega in signals(s).items():
         yd = with_lead_in(seed002_motion(t, omega_rad_s=omega, amplitude=float(s.amplitude),
                                          offset=float(s.offset)),
-                          start=trial.rest, lead_s=lead)
+                          start=trial.rest, lead_s=lead, dt_s=DT_S)
         runs = motion_runs(s, trial, yd)
         rows.extend(stats_row(res, skip_s=lead, **trial.keys(sig)) for res in runs.values())
         if trial.number == 0 and plots and sig in PLOTTED:

@@ -135,3 +135,24 @@ def mlflow_store(root: Path) -> Path:
     root.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(template, root / "mlflow.db")
     return root / "mlflow.db"
+
+
+#: The quick campaign made shorter still: two periods per amplitude, 10 s evaluation runs.
+SHORT_CAMPAIGN = [*(f"campaign.excitations.{i}.periods_per_amplitude=2" for i in range(3)),
+                  *(f"campaign.excitations.{i}.duration_s=10.0" for i in (3, 4))]
+
+
+def listed(stage: str, overrides: list[str]) -> str:
+    """``overrides.<stage>=['a=1','b=2']`` (each stage override quoted for Hydra's grammar)."""
+    return f"overrides.{stage}=[{','.join(repr(o) for o in overrides)}]"
+
+
+def small_pipeline(root: Path) -> list[str]:
+    """``make pipeline``'s overrides for a small run in ``root``: the shortened quick campaign,
+    linear and gamma only, small figures."""
+    return [f"paths.root={root}", "n_jobs=1", "progress=false",
+            listed("generate", ["campaign=quick", "n_jobs=1", "progress=false",
+                                *SHORT_CAMPAIGN]),
+            listed("ingest", ["progress=false"]),
+            listed("fit", ["families=[linear,gamma]"]),
+            listed("report", ["plots.dpi=40"])]

@@ -11,15 +11,7 @@ from mlflow import MlflowClient
 from mlflow.entities import ViewType
 
 from pipelines.run_all import compose_stage, run_pipeline
-from tests.pipelines.pipeline_data import mlflow_store
-
-SHORT = [*(f"campaign.excitations.{i}.periods_per_amplitude=2" for i in range(3)),
-         *(f"campaign.excitations.{i}.duration_s=10.0" for i in (3, 4))]
-
-
-def _listed(stage: str, overrides: list[str]) -> str:
-    """``overrides.<stage>=['a=1','b=2']`` (each stage override quoted for Hydra's grammar)."""
-    return f"overrides.{stage}=[{','.join(repr(o) for o in overrides)}]"
+from tests.pipelines.pipeline_data import mlflow_store, small_pipeline
 
 
 def _check_first_outputs(reports: Path) -> pd.DataFrame:
@@ -57,13 +49,7 @@ def _check_first_outputs(reports: Path) -> pd.DataFrame:
 
 def test_small_pipeline_end_to_end_and_incremental_rerun(tmp_path: Path) -> None:
     mlflow_store(tmp_path)
-    cfg = compose_stage("pipeline", [
-        f"paths.root={tmp_path}", "n_jobs=1", "progress=false",
-        _listed("generate", ["campaign=quick", "n_jobs=1", "progress=false", *SHORT]),
-        _listed("ingest", ["progress=false"]),
-        _listed("fit", ["families=[linear,gamma]"]),
-        _listed("report", ["plots.dpi=40"]),
-    ])
+    cfg = compose_stage("pipeline", small_pipeline(tmp_path))
     first = run_pipeline(cfg)
     assert first.generate_report is not None and len(first.generate_report["written"]) == 10
     assert first.ingest_report is not None and first.ingest_report["n_rejected"] == 0

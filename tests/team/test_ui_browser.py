@@ -28,15 +28,11 @@ sync_api = pytest.importorskip(
 
 from pipelines import localserv  # noqa: E402
 from pipelines.run_all import compose_stage, run_pipeline  # noqa: E402
-from tests.pipelines.pipeline_data import mlflow_store  # noqa: E402
+from tests.pipelines.pipeline_data import mlflow_store, small_pipeline  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 SHOTS = Path(os.environ.get("TSM_UI_SHOTS", REPO / "data" / "reports" / "ui"))
-SHORT = [f"campaign.excitations.{i}.periods_per_amplitude=2" for i in range(3)]
 
-
-def _listed(stage: str, overrides: list[str]) -> str:
-    return f"overrides.{stage}=[{','.join(repr(o) for o in overrides)}]"
 
 
 def _chromium() -> str:
@@ -52,13 +48,7 @@ def pipeline_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A small ``make pipeline`` (4 configurations, linear and gamma) in its own folder."""
     root = tmp_path_factory.mktemp("ui")
     mlflow_store(root)
-    cfg = compose_stage("pipeline", [
-        f"paths.root={root}", "n_jobs=1", "progress=false",
-        _listed("generate", ["campaign=quick", "n_jobs=1", "progress=false", *SHORT]),
-        _listed("ingest", ["progress=false"]),
-        _listed("fit", ["families=[linear,gamma]"]),
-        _listed("report", ["plots.dpi=40"]),
-    ])
+    cfg = compose_stage("pipeline", small_pipeline(root))
     result = run_pipeline(cfg)
     assert result.parent_run_id is not None
     return root
