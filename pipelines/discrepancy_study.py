@@ -68,7 +68,7 @@ def hidden_effect_runs(effects: Mapping[str, float], configs: Sequence[tuple[flo
     """Virtual-rig runs with ``effects`` switched on, as the workflow sees them (dataset rows
     only: the effect's name and strength are not passed on)."""
     import rig_io.virtual as rig
-    from pipelines.discrepancy import rows_from_raw, runs_from_dataset
+    from pipelines.discrepancy_data import rows_from_raw, runs_from_dataset
 
     exc = dict(excitations or STUDY_EXCITATIONS)
     raws = [rig.simulate_run(curve_angle_deg=phi, radius_mm=r, excitation=dict(e),

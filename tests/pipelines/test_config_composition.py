@@ -103,20 +103,22 @@ def test_discrepancy_workflow_is_a_typed_node_with_its_defaults_in_one_place() -
     from hydra.errors import ConfigCompositionException
 
     from hysteresis.discrepancy.workflow import WorkflowSettings
-    from pipelines.discrepancy import DiscrepancyError, workflow_settings
+    from pipelines.discrepancy import DiscrepancyError, settings, workflow_settings
 
-    plain = to_container(_compose("discrepancy", ["workflow.max_effects=2"]))
+    plain = to_container(_compose("discrepancy", ["workflow.max_effects=2", "progress=true"]))
     defaults = asdict(WorkflowSettings())
     assert set(plain["workflow"]) == set(defaults)
-    settings = workflow_settings(plain["workflow"], progress=True)
-    assert settings == WorkflowSettings(max_effects=2, progress=True)
+    typed = settings(plain)
+    assert typed.workflow == WorkflowSettings(max_effects=2, candidates=list(defaults[
+        "candidates"]))  # a list in the config; the workflow's own tuple below
+    assert workflow_settings(typed) == WorkflowSettings(max_effects=2, progress=True)
     for bad in ("workflow.max_efects=2", "workflow.max_effects=two"):
         with pytest.raises(ConfigCompositionException):
             _compose("discrepancy", [bad])
     # a forced addition composes, and the stage refuses it
-    forced = to_container(_compose("discrepancy", ["+workflow.max_efects=2"]))["workflow"]
-    with pytest.raises(DiscrepancyError, match=r"unknown workflow setting\(s\) \['max_efects'\]"):
-        workflow_settings(forced)
+    forced = to_container(_compose("discrepancy", ["+workflow.max_efects=2"]))
+    with pytest.raises(DiscrepancyError, match=r"^workflow.max_efects: Key 'max_efects' not in"):
+        settings(forced)
 
 
 #: Per converted stage: an override with a misspelt key and one with a mistyped value.
