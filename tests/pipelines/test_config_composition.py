@@ -363,9 +363,11 @@ def test_entry_point_overrides_reach_their_settings() -> None:
 def test_a_hand_written_mapping_replaces_the_default_mapping_whole() -> None:
     from pipelines.schemas import DiscrepancyConfig, DiscrepancyStudyConfig, with_defaults
 
-    study = with_defaults(DiscrepancyStudyConfig, {"combinations": {},
+    study = with_defaults(DiscrepancyStudyConfig, {"combinations": {"strengths": {}},
                                                    "strengths": {"drift": [1.0]}})
-    assert study["combinations"] == {} and study["strengths"] == {"drift": [1.0]}
+    # combinations is a typed node: its own free mapping is replaced, its other field kept
+    assert study["combinations"] == {"strengths": {}, "pairs_selected": ["a"]}
+    assert study["strengths"] == {"drift": [1.0]}
     assert study["pairs_selected"] == ["a", "b", "c", "d", "e"] and study["workflow"] == {}
     disc = with_defaults(DiscrepancyConfig, {"auto_families": {"gamma": {}},
                                              "signals": {"input": "u"},

@@ -144,3 +144,14 @@ def test_headline_names_what_the_load_cells_show_but_the_model_already_reproduce
     line = headline(rep)
     assert line.startswith("unexplained") and "9.0x the noise floor" in line
     assert "tried: drift, time_delay" in line and "no missing effect" not in line
+
+
+def test_the_discrepancy_stages_look_up_no_setting_by_key() -> None:
+    """Their settings are typed objects: a setting is an attribute (a misspelt one fails the
+    type check), never a ``cfg["..."]`` or ``cfg.get(...)`` found only when reached."""
+    import re
+
+    for name in ("discrepancy", "discrepancy_study", "discrepancy_data", "discrepancy_plots",
+                 "compile_kernels"):
+        text = (REPO / "pipelines" / f"{name}.py").read_text(encoding="utf-8")
+        assert not re.search(r"\bcfg(\[|\.get\()", text), name
