@@ -49,8 +49,9 @@ from rig_io.errors import RigIOError
 #: The stage's edge, and what the benches import from here (the science's home is
 #: ``hysteresis.discrepancy``; the data step's ``pipelines.discrepancy_data``).
 __all__ = ["DiscrepancyError", "Result", "Settings", "analyse", "asks_best_family",
-           "best_family_answers", "choose_base", "ingest_source", "run", "runs_from_dataset",
-           "stage", "track", "write"]
+           "best_family_answers", "choose_base", "ingest_source", "plots_dir", "report_path",
+           "run", "runs_from_dataset", "settings", "stage", "track", "workflow_settings",
+           "write"]
 
 log = logging.getLogger(__name__)
 #: Work folders in the temp dir: ``tsm-discrepancy-<host>-<pid>-*`` (leaks of killed runs
