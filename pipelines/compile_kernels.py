@@ -41,7 +41,7 @@ def compile_rig() -> None:
     """The rig's physics with every effect on, and the ingest (calibration, the clock
     synchroniser's Kalman smoother) of its raw run."""
     import rig_io.virtual as rig
-    from pipelines.discrepancy import rows_from_raw
+    from pipelines.discrepancy_data import rows_from_raw
     from rig_io.virtual.effects import EFFECT_NAMES
 
     raw = rig.simulate_run(curve_angle_deg=90.0, radius_mm=30.0, seed=0,

@@ -24,11 +24,13 @@ import math
 import os
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from omegaconf.errors import MissingMandatoryValue, OmegaConfBaseException
 
 from hysteresis.discrepancy.runs import RunData
 from hysteresis.discrepancy.workflow import (
@@ -38,6 +40,7 @@ from hysteresis.discrepancy.workflow import (
     run_workflow,
 )
 from pipelines import schemas
+from pipelines.schemas import StudyExpectation
 from rig_io.atomic import write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -61,6 +64,24 @@ class StudyError(Exception):
     """Bad configuration for the discrepancy study."""
 
 
+Settings = schemas.DiscrepancyStudyConfig
+
+
+@dataclass
+class StudyResult:
+    """What :func:`run` found: every single-effect case, every two-effect case, the pairs
+    studied and the seconds the cases took."""
+
+    cases: list[dict[str, Any]]
+    combos: list[dict[str, Any]]
+    pairs: dict[str, Any]
+    elapsed_s: float
+
+
+#: What a config must give.
+REQUIRED = "out=<path stem> is required"
+
+
 def hidden_effect_runs(effects: Mapping[str, float], configs: Sequence[tuple[float, float]], *,
                        seed: int = 3, rate_hz: float = 20.0,
                        excitations: Mapping[str, Mapping[str, Any]] | None = None,
@@ -68,7 +89,7 @@ def hidden_effect_runs(effects: Mapping[str, float], configs: Sequence[tuple[flo
     """Virtual-rig runs with ``effects`` switched on, as the workflow sees them (dataset rows
     only: the effect's name and strength are not passed on)."""
     import rig_io.virtual as rig
-    from pipelines.discrepancy import rows_from_raw, runs_from_dataset
+    from pipelines.discrepancy_data import rows_from_raw, runs_from_dataset
 
     exc = dict(excitations or STUDY_EXCITATIONS)
     raws = [rig.simulate_run(curve_angle_deg=phi, radius_mm=r, excitation=dict(e),
@@ -235,7 +256,7 @@ def detection_limits(cases: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, 
 
 
 def shortfalls(cases: Sequence[Mapping[str, Any]], combos: Sequence[Mapping[str, Any]],
-               expect: Sequence[Mapping[str, Any]], *,
+               expect: Sequence[StudyExpectation], *,
                combination_reduction: float) -> list[str]:
     """The study's expectations a run did not meet, one line each (empty: all met).
 
@@ -254,35 +275,38 @@ def shortfalls(cases: Sequence[Mapping[str, Any]], combos: Sequence[Mapping[str,
                        f"{100 * c['reduction']:.0f} % < {100 * combination_reduction:.0f} %")
     by_key = {(c["effect"], float(c["strength"]), c["pair"]): c for c in cases}
     for e in expect:
-        case = by_key.get((e["effect"], float(e["strength"]), e["pair"]))
-        if case is None:
-            continue
-        c = case
-        what = f"{e['effect']} {float(e['strength']):g} on pair {e['pair']}"
-        outcome = e.get("outcome", "halved")
-        if outcome == "clean":
-            if c["named"]:
-                out.append(f"{what}: expected no effect, named {c['named']}")
-        elif not c["correct"]:
-            out.append(f"{what}: named first {c['first_named']!r}")
-        elif outcome == "halved" and not c["halved"]:
-            per = ", ".join(f"{100 * v:.0f} %" for v in c["reduction_per_configuration"].values())
-            out.append(f"{what}: not halved in every configuration ({per})")
-        elif outcome == "named" and c["reduction"] < float(e.get("min_reduction", 0.0)):
-            out.append(f"{what}: removes {100 * c['reduction']:.0f} % < "
-                       f"{100 * float(e['min_reduction']):.0f} %")
+        case = by_key.get((e.effect, float(e.strength), e.pair))
+        missed = _missed(e, case) if case is not None else None
+        if missed:
+            out.append(missed)
     return out
 
 
-def _check_expect(expect: Sequence[Mapping[str, Any]], pairs: Mapping[str, Any]) -> None:
+def _missed(e: StudyExpectation, c: Mapping[str, Any]) -> str | None:
+    """How case ``c`` falls short of expectation ``e`` (None: it does not)."""
+    what = f"{e.effect} {float(e.strength):g} on pair {e.pair}"
+    if e.outcome == "clean":
+        return f"{what}: expected no effect, named {c['named']}" if c["named"] else None
+    if not c["correct"]:
+        return f"{what}: named first {c['first_named']!r}"
+    if e.outcome == "halved" and not c["halved"]:
+        per = ", ".join(f"{100 * v:.0f} %" for v in c["reduction_per_configuration"].values())
+        return f"{what}: not halved in every configuration ({per})"
+    if e.outcome == "named" and c["reduction"] < float(e.min_reduction):
+        return (f"{what}: removes {100 * c['reduction']:.0f} % < "
+                f"{100 * float(e.min_reduction):.0f} %")
+    return None
+
+
+def _check_expect(expect: Sequence[StudyExpectation], pairs: Mapping[str, Any]) -> None:
     """An ``expect`` row that names no known effect, pair or outcome could never be checked:
     stop before any case runs."""
     from rig_io.virtual.effects import EFFECT_NAMES
 
     for i, e in enumerate(expect):
-        for key, value, known in (("effect", e["effect"], EFFECT_NAMES),
-                                  ("pair", e["pair"], tuple(pairs)),
-                                  ("outcome", e["outcome"], OUTCOMES)):
+        for key, value, known in (("effect", e.effect, EFFECT_NAMES),
+                                  ("pair", e.pair, tuple(pairs)),
+                                  ("outcome", e.outcome, OUTCOMES)):
             if value not in known:
                 raise StudyError(f"expect[{i}]: unknown {key} {value!r}; known: {list(known)}")
 
@@ -342,94 +366,103 @@ def _fmt(x: float | None) -> str:
     return "not reached" if x is None else f"{x:g}"
 
 
-def run(cfg: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """Run the stage from a plain config mapping; writes ``<out>.json`` and ``<out>.md``.
+def settings(cfg: Any) -> Settings:
+    """The study's typed settings (:func:`pipelines.schemas.settings`); a missing ``out``, an
+    unknown or mistyped setting is named in one line."""
+    try:
+        s = schemas.settings(Settings, cfg)
+    except MissingMandatoryValue:
+        raise StudyError(REQUIRED) from None
+    except OmegaConfBaseException as err:
+        raise StudyError(f"{err.full_key}: {str(err).splitlines()[0]}") from None
+    if not s.out:
+        raise StudyError(REQUIRED)
+    return s
 
-    ``cfg``: a composed ``conf/discrepancy_study.yaml`` or a hand-written mapping; settings
-    it leaves out take their defaults from :class:`pipelines.schemas.DiscrepancyStudyConfig`
-    (a mapping given, e.g. ``combinations={}``, replaces the default one whole)."""
-    cfg = schemas.with_defaults(schemas.DiscrepancyStudyConfig, cfg)
-    if not cfg.get("out"):
-        raise StudyError("out=<path stem> is required")
-    out = Path(os.path.abspath(os.path.expanduser(str(cfg["out"]))))  # links refused, not followed
-    all_pairs = dict(cfg["pairs"])
-    chosen = cfg["pairs_selected"] or list(all_pairs)
-    missing = [p for p in chosen if p not in all_pairs]
-    if missing:
-        raise StudyError(f"unknown pair(s) {missing}; defined: {sorted(all_pairs)}")
-    strengths = dict(cfg["strengths"])
-    effects = cfg["effects_selected"]
-    if effects is not None:
-        unknown = sorted(set(effects) - set(strengths))
-        if unknown:
-            raise StudyError(f"effects_selected {unknown} have no strengths; "
-                             f"defined: {sorted(strengths)}")
-        strengths = {e: strengths[e] for e in effects}
-    # Check the two-effect part before the long single-effect part runs.
-    combos_cfg = dict(cfg["combinations"])  # a free mapping: no strengths = no such cases
-    cpairs = list(combos_cfg.get("pairs_selected") or [])
-    if combos_cfg.get("strengths"):
-        from rig_io.virtual.effects import EFFECT_NAMES
 
-        missing = [p for p in cpairs if p not in all_pairs]
-        if missing:
-            raise StudyError(f"combinations: unknown pair(s) {missing}; defined: "
-                             f"{sorted(all_pairs)}")
-        bad = sorted(set(combos_cfg["strengths"]) - set(EFFECT_NAMES))
-        if bad:
-            raise StudyError(f"combinations: unknown effect(s) {bad}; "
-                             f"known: {list(EFFECT_NAMES)}")
-    _check_expect(cfg["expect"], all_pairs)
+def out_paths(s: Settings) -> tuple[Path, Path]:
+    """``<out>.json`` and ``<out>.md`` (links refused, not followed: never resolved)."""
+    out = Path(os.path.abspath(os.path.expanduser(s.out)))
+    return out.with_suffix(".json"), out.with_suffix(".md")
+
+
+def run(cfg: Any) -> StudyResult:
+    """Every case the settings select; writes nothing. Every setting is checked before the
+    first case runs (the two-effect part before the long single-effect part).
+
+    ``cfg``: the study's :class:`Settings`, a composed ``conf/discrepancy_study.yaml`` or a
+    hand-written mapping (settings it leaves out take their defaults; a free mapping given,
+    e.g. ``strengths``, replaces the default one whole)."""
+    s = settings(cfg)
+    pairs = _selected_pairs(s.pairs, s.pairs_selected or list(s.pairs), "")
+    strengths = _selected_strengths(s.strengths, s.effects_selected)
+    combo_pairs = _selected_pairs(s.pairs, s.combinations.pairs_selected, "combinations: ") \
+        if s.combinations.strengths else {}
+    _check_effects(s.combinations.strengths, "combinations: ")
+    _check_expect(s.expect, s.pairs)
     t0 = time.perf_counter()
-    cases = run_study(strengths=strengths,
-                      pairs={p: all_pairs[p] for p in chosen}, seed=int(cfg["seed"]),
-                      rate_hz=float(cfg["rate_hz"]), base=str(cfg["base_family"]),
-                      workflow=dict(cfg["workflow"]), n_jobs=int(cfg["n_jobs"]),
-                      progress=bool(cfg["progress"]))
+    common: dict[str, Any] = {"seed": s.seed, "rate_hz": s.rate_hz, "base": s.base_family,
+                              "workflow": dict(s.workflow), "n_jobs": s.n_jobs,
+                              "progress": s.progress}
+    cases = run_study(strengths=strengths, pairs=pairs, **common)
     combos: list[dict[str, Any]] = []
-    if combos_cfg.get("strengths"):
-        combos = run_combinations(strengths=dict(combos_cfg["strengths"]),
-                                  pairs={p: all_pairs[p] for p in cpairs},
-                                  seed=int(cfg["seed"]), rate_hz=float(cfg["rate_hz"]),
-                                  base=str(cfg["base_family"]), workflow=dict(cfg["workflow"]),
-                                  n_jobs=int(cfg["n_jobs"]), progress=bool(cfg["progress"]))
-    doc = {"cases": cases, "detection_limits": detection_limits(cases),
-           "combinations": combos,
-           "settings": {k: cfg[k] for k in ("seed", "rate_hz", "base_family", "workflow",
-                                            "strengths")},
-           "pairs": {p: all_pairs[p] for p in chosen},
-           "elapsed_s": round(time.perf_counter() - t0, 1)}
-    json_path, md_path = out.with_suffix(".json"), out.with_suffix(".md")
+    if s.combinations.strengths:
+        combos = run_combinations(strengths=dict(s.combinations.strengths), pairs=combo_pairs,
+                                  **common)
+    return StudyResult(cases=cases, combos=combos, pairs=pairs,
+                       elapsed_s=round(time.perf_counter() - t0, 1))
+
+
+def _selected_pairs(pairs: Mapping[str, Any], chosen: Sequence[str], what: str
+                    ) -> dict[str, Any]:
+    missing = [p for p in chosen if p not in pairs]
+    if missing:
+        raise StudyError(f"{what}unknown pair(s) {missing}; defined: {sorted(pairs)}")
+    return {p: pairs[p] for p in chosen}
+
+
+def _selected_strengths(strengths: Mapping[str, Any], effects: Sequence[str] | None
+                        ) -> dict[str, Any]:
+    if effects is None:
+        return dict(strengths)
+    unknown = sorted(set(effects) - set(strengths))
+    if unknown:
+        raise StudyError(f"effects_selected {unknown} have no strengths; "
+                         f"defined: {sorted(strengths)}")
+    return {e: strengths[e] for e in effects}
+
+
+def _check_effects(strengths: Mapping[str, Any], what: str) -> None:
+    from rig_io.virtual.effects import EFFECT_NAMES
+
+    bad = sorted(set(strengths) - set(EFFECT_NAMES))
+    if bad:
+        raise StudyError(f"{what}unknown effect(s) {bad}; known: {list(EFFECT_NAMES)}")
+
+
+def write(result: StudyResult, s: Settings) -> list[Path]:
+    """``<out>.json`` (every case, the detection limits, the settings) and ``<out>.md`` (the
+    tables), both atomically; returns their paths."""
+    doc = {"cases": result.cases, "detection_limits": detection_limits(result.cases),
+           "combinations": result.combos,
+           "settings": {"seed": s.seed, "rate_hz": s.rate_hz, "base_family": s.base_family,
+                        "workflow": s.workflow, "strengths": s.strengths},
+           "pairs": result.pairs, "elapsed_s": result.elapsed_s}
+    json_path, md_path = out_paths(s)
     write_text_atomic(json_path, json.dumps(doc, indent=1) + "\n")
-    write_text_atomic(md_path, markdown(cases) + (markdown_combinations(combos) if combos
-                                                   else ""))
-    _track(cfg, cases, [json_path, md_path], combos)
-    log.info("wrote %s and %s (%d cases, %.0f s)", json_path, md_path, len(cases),
-             doc["elapsed_s"])
-    ran = {(c["effect"], float(c["strength"]), c["pair"]) for c in cases}
-    unchecked = [e for e in cfg["expect"]
-                 if (e["effect"], float(e["strength"]), e["pair"]) not in ran]
-    if unchecked:  # left out by the selection: say so rather than pass them silently
-        log.warning("%d expectation(s) not checked, their cases did not run: %s",
-                    len(unchecked), ", ".join(f"{e['effect']} {float(e['strength']):g} on "
-                                              f"pair {e['pair']}" for e in unchecked))
-    missed = shortfalls(cases, combos, cfg["expect"],
-                        combination_reduction=float(cfg["expect_combination_reduction"]))
-    if missed:
-        raise StudyError(f"the study fell short of {len(missed)} expectation(s) "
-                         f"(tables written to {md_path}):\n  " + "\n  ".join(missed))
-    return cases
+    write_text_atomic(md_path, markdown(result.cases) + (
+        markdown_combinations(result.combos) if result.combos else ""))
+    return [json_path, md_path]
 
 
-def _track(cfg: Mapping[str, Any], cases: Sequence[Mapping[str, Any]],
-           files: Sequence[Path], combos: Sequence[Mapping[str, Any]] = ()) -> None:
-    from pipelines.tracking import StageRun, stage_tracker
+def track(tracker: Any, result: StudyResult, s: Settings, files: Sequence[Path]) -> None:
+    """One MLflow run under the stage's parent: each case's reduction, the counts, the
+    settings and the two files."""
+    from pipelines.tracking import StageRun
 
-    tracker = stage_tracker(cfg)
-    if tracker is None:
-        return
-    with StageRun(tracker, "discrepancy_study") as stage, tracker.run(
-            "discrepancy_study", parent_id=stage.parent_id,
+    cases, combos = result.cases, result.combos
+    with StageRun(tracker, "discrepancy_study") as stage_run, tracker.run(
+            "discrepancy_study", parent_id=stage_run.parent_id,
             tags={"stage": "discrepancy_study", "kind": "analysis"}) as run_id:
         metrics = {f"{c['pair']}.{c['effect']}.{c['strength']:g}.reduction": c["reduction"]
                    for c in cases if math.isfinite(c["reduction"])}
@@ -439,11 +472,44 @@ def _track(cfg: Mapping[str, Any], cases: Sequence[Mapping[str, Any]],
             metrics["combinations_all_named"] = float(sum(bool(c["all_named"]) for c in combos))
             metrics["combinations_all_added"] = float(sum(bool(c["all_added"]) for c in combos))
             metrics["combinations"] = float(len(combos))
-        params = {"base_family": str(cfg["base_family"]),
-                  **{f"workflow.{k}": str(v) for k, v in cfg["workflow"].items()}}
+        params = {"base_family": s.base_family,
+                  **{f"workflow.{k}": str(v) for k, v in s.workflow.items()}}
         tracker.log(run_id, params=params, metrics=metrics)
         for f in files:
             tracker.log_artifact(run_id, f, "reports")
+
+
+def stage(cfg: Any) -> list[dict[str, Any]]:
+    """The whole study from a config (:func:`run`, :func:`write`, :func:`track`), then its
+    expectations: a shortfall raises :class:`StudyError` naming each case, after the tables
+    are written. Returns the single-effect cases."""
+    from pipelines.tracking import stage_tracker
+
+    s = settings(cfg)
+    result = run(s)
+    files = write(result, s)
+    tracker = stage_tracker({"tracking": s.tracking, "paths": s.paths})
+    if tracker is not None:
+        track(tracker, result, s, files)
+    log.info("wrote %s and %s (%d cases, %.0f s)", *files, len(result.cases), result.elapsed_s)
+    _warn_unchecked(s.expect, result.cases)
+    missed = shortfalls(result.cases, result.combos, s.expect,
+                        combination_reduction=s.expect_combination_reduction)
+    if missed:
+        raise StudyError(f"the study fell short of {len(missed)} expectation(s) "
+                         f"(tables written to {files[1]}):\n  " + "\n  ".join(missed))
+    return result.cases
+
+
+def _warn_unchecked(expect: Sequence[StudyExpectation], cases: Sequence[Mapping[str, Any]]
+                    ) -> None:
+    """Expectations the selection left out: say so rather than pass them silently."""
+    ran = {(c["effect"], float(c["strength"]), c["pair"]) for c in cases}
+    unchecked = [e for e in expect if (e.effect, float(e.strength), e.pair) not in ran]
+    if unchecked:
+        log.warning("%d expectation(s) not checked, their cases did not run: %s",
+                    len(unchecked), ", ".join(f"{e.effect} {float(e.strength):g} on "
+                                              f"pair {e.pair}" for e in unchecked))
 
 
 def _main() -> None:
@@ -454,7 +520,7 @@ def _main() -> None:
 
     @hydra.main(config_path="../conf", config_name="discrepancy_study", version_base="1.3")
     def main(cfg: DictConfig) -> None:
-        cases = run_stage("discrepancy_study", lambda: run(to_container(cfg)))
+        cases = run_stage("discrepancy_study", lambda: stage(to_container(cfg)))
         ok = sum(bool(c["halved"]) for c in cases)
         print(f"{len(cases)} cases; {ok} named first and halved; table: {cfg.out}.md")
 

@@ -374,6 +374,26 @@ class StudyExpectation:
     min_reduction: float = 0.0
 
 
+@dataclass
+class StudyCombinations:
+    """Two effects hidden at once (``combinations`` of the study)."""
+
+    #: One strength per effect, where each alone is named first; every pair of these effects
+    #: is a case. Given, it replaces the default mapping whole; empty
+    #: (``combinations.strengths={}``) = no two-effect cases.
+    strengths: dict[str, Any] = field(default_factory=lambda: {
+        "rate_dependence": 1.0,
+        "tendon_elongation": 8.0,
+        "time_delay": 1.0,
+        "drift": 2.0,
+        "asymmetry": 2.0,
+        "saturation": 1.0,
+        "dead_zone": 1.0,
+    })
+    #: The configuration pairs (of the study's ``pairs``) the two-effect cases run on.
+    pairs_selected: list[str] = field(default_factory=lambda: ["a"])
+
+
 def _study_expectations() -> list[StudyExpectation]:
     halved = [("time_delay", 1.0, "a"), ("saturation", 1.0, "a"), ("dead_zone", 1.0, "e"),
               ("rate_dependence", 1.0, "e"), ("rate_dependence", 1.5, "a"), ("drift", 2.0, "a"),
@@ -425,21 +445,9 @@ class DiscrepancyStudyConfig:
     #: The pairs studied (null or empty = every pair in ``pairs``).
     pairs_selected: list[str] | None = field(
         default_factory=lambda: ["a", "b", "c", "d", "e"])
-    #: Two effects at once: every pair of the effects under ``strengths`` (one strength each,
-    #: where each alone is named first) on the configuration pairs of its own
-    #: ``pairs_selected``. Empty strengths = skip.
-    combinations: dict[str, Any] = field(default_factory=lambda: {
-        "strengths": {
-            "rate_dependence": 1.0,
-            "tendon_elongation": 8.0,
-            "time_delay": 1.0,
-            "drift": 2.0,
-            "asymmetry": 2.0,
-            "saturation": 1.0,
-            "dead_zone": 1.0,
-        },
-        "pairs_selected": ["a"],
-    })
+    #: Two effects at once: every pair of the effects under ``combinations.strengths`` (one
+    #: strength each) on the configuration pairs of ``combinations.pairs_selected``.
+    combinations: StudyCombinations = field(default_factory=StudyCombinations)
     #: What the study must show, checked after its tables are written (a shortfall fails the
     #: stage, naming each case): every clean case answers no effect, every two-effect
     #: combination names both effects and its terms remove at least
@@ -553,7 +561,8 @@ def with_defaults(schema: type[Any], cfg: Mapping[str, Any]) -> dict[str, Any]:
     does not know are kept, so one plain config may serve several stages; group nodes left
     unset (``paths`` ...) are left out. A typed node merges field by field
     (``{"plots": {"dpi": 30}}`` keeps the other plot settings); a free mapping given
-    (``auto_families``, ``combinations``) replaces its default whole, as the value it is.
+    (``auto_families``, the study's ``strengths``) replaces its default whole, as the value
+    it is.
     A mistyped value raises :class:`omegaconf.errors.ValidationError` (a ``ValueError``)
     naming the key.
     """

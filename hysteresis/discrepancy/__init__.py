@@ -4,7 +4,9 @@ shrink on held-out runs. Pure arrays in, small dicts out (no files, no MLflow).
 
 Modules: :mod:`.runs` (the arrays of one run), :mod:`.locate` (residual analysis),
 :mod:`.effects` (the candidate library and the composed model), :mod:`.workflow` (the loop),
-:mod:`.bases` (two small local base models).
+:mod:`.bases` (two small local base models), :mod:`.analysis` (the discrepancy stage's
+computation: :mod:`.ranking` chooses the base, :mod:`.base_check` checks a given one,
+:mod:`.headline` says the answer).
 """
 
 from hysteresis.discrepancy.effects import CANDIDATES, EFFECT_NAMES, ComposedModel, Term, candidate

@@ -17,7 +17,7 @@ from hysteresis.roles import (
     run_role,
     tail_start,
 )
-from pipelines import discrepancy, stages
+from pipelines import discrepancy_data, stages
 from pipelines.common import PipelineError
 
 
@@ -80,10 +80,10 @@ def test_the_discrepancy_stage_reads_roles_with_the_same_rule() -> None:
     frame["tension_in_n"] = np.nan
     frame["tension_out_n"] = np.nan
     meta = {"r1": {"manifest": {"excitation": {"role": "test"}}}, "r2": {}}
-    runs = discrepancy.runs_from_dataset(frame, meta, identify_excitations=["triangle"])
+    runs = discrepancy_data.runs_from_dataset(frame, meta, identify_excitations=["triangle"])
     assert {r.run_id: r.role for r in runs} == {"r1": HELDOUT, "r2": IDENTIFICATION}
     stage_roles = stages.manifest_roles(meta)
     assert stage_roles == {"r1": HELDOUT}
     bad = {"r1": {"manifest": {"excitation": {"role": "tst"}}}}
-    with pytest.raises(discrepancy.DiscrepancyError, match="tst"):
-        discrepancy.runs_from_dataset(frame, bad, identify_excitations=["triangle"])
+    with pytest.raises(discrepancy_data.DiscrepancyError, match="tst"):
+        discrepancy_data.runs_from_dataset(frame, bad, identify_excitations=["triangle"])

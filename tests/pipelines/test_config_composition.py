@@ -104,20 +104,22 @@ def test_discrepancy_workflow_is_a_typed_node_with_its_defaults_in_one_place() -
     from hydra.errors import ConfigCompositionException
 
     from hysteresis.discrepancy.workflow import WorkflowSettings
-    from pipelines.discrepancy import DiscrepancyError, workflow_settings
+    from pipelines.discrepancy import DiscrepancyError, settings, workflow_settings
 
-    plain = to_container(_compose("discrepancy", ["workflow.max_effects=2"]))
+    plain = to_container(_compose("discrepancy", ["workflow.max_effects=2", "progress=true"]))
     defaults = asdict(WorkflowSettings())
     assert set(plain["workflow"]) == set(defaults)
-    settings = workflow_settings(plain["workflow"], progress=True)
-    assert settings == WorkflowSettings(max_effects=2, progress=True)
+    typed = settings(plain)
+    assert typed.workflow == WorkflowSettings(max_effects=2, candidates=list(defaults[
+        "candidates"]))  # a list in the config; the workflow's own tuple below
+    assert workflow_settings(typed) == WorkflowSettings(max_effects=2, progress=True)
     for bad in ("workflow.max_efects=2", "workflow.max_effects=two"):
         with pytest.raises(ConfigCompositionException):
             _compose("discrepancy", [bad])
     # a forced addition composes, and the stage refuses it
-    forced = to_container(_compose("discrepancy", ["+workflow.max_efects=2"]))["workflow"]
-    with pytest.raises(DiscrepancyError, match=r"unknown workflow setting\(s\) \['max_efects'\]"):
-        workflow_settings(forced)
+    forced = to_container(_compose("discrepancy", ["+workflow.max_efects=2"]))
+    with pytest.raises(DiscrepancyError, match=r"^workflow.max_efects: Key 'max_efects' not in"):
+        settings(forced)
 
 
 #: Per converted stage: an override with a misspelt key and one with a mistyped value.
@@ -362,9 +364,11 @@ def test_entry_point_overrides_reach_their_settings() -> None:
 def test_a_hand_written_mapping_replaces_the_default_mapping_whole() -> None:
     from pipelines.schemas import DiscrepancyConfig, DiscrepancyStudyConfig, with_defaults
 
-    study = with_defaults(DiscrepancyStudyConfig, {"combinations": {},
+    study = with_defaults(DiscrepancyStudyConfig, {"combinations": {"strengths": {}},
                                                    "strengths": {"drift": [1.0]}})
-    assert study["combinations"] == {} and study["strengths"] == {"drift": [1.0]}
+    # combinations is a typed node: its own free mapping is replaced, its other field kept
+    assert study["combinations"] == {"strengths": {}, "pairs_selected": ["a"]}
+    assert study["strengths"] == {"drift": [1.0]}
     assert study["pairs_selected"] == ["a", "b", "c", "d", "e"] and study["workflow"] == {}
     disc = with_defaults(DiscrepancyConfig, {"auto_families": {"gamma": {}},
                                              "signals": {"input": "u"},

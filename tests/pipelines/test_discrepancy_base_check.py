@@ -9,17 +9,13 @@ from typing import Any
 import pytest
 from hydra import compose, initialize_config_dir
 
+from hysteresis.discrepancy.analysis import analyse
+from hysteresis.discrepancy.base_check import base_misfit, second_opinion
+from hysteresis.discrepancy.headline import headline
 from hysteresis.discrepancy.inject import SIZES, injected_runs
+from hysteresis.discrepancy.ranking import choose_base, pick_base
 from hysteresis.discrepancy.workflow import base_factory_for, run_workflow
 from pipelines.common import CONF_DIR, to_container
-from pipelines.discrepancy import (
-    analyse,
-    base_misfit,
-    choose_base,
-    headline,
-    pick_base,
-    second_opinion,
-)
 
 
 @pytest.fixture(scope="module")

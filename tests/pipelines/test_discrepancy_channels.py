@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipelines.discrepancy import channel_values, runs_from_dataset
-from pipelines.ingest import run_ingest
+from pipelines.core.ingest import run_ingest
+from pipelines.discrepancy_data import channel_values, runs_from_dataset
 from rig_io.dataset import read_dataset, read_runs
 from tests.cleanroom import riglog
 

@@ -12,7 +12,8 @@ from typing import Any
 
 import pytest
 
-from pipelines.discrepancy import analyse, ingest_source, runs_from_dataset
+from hysteresis.discrepancy.analysis import analyse
+from pipelines.discrepancy_data import ingest_source, runs_from_dataset
 
 CLEANROOM = Path(__file__).resolve().parents[1] / "cleanroom"
 #: The base (as ``auto_families.gamma_free``): free play weights with an offset, start fitted.

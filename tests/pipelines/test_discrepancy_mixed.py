@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from pipelines import discrepancy
+from pipelines import discrepancy, discrepancy_data
 from rig_io.folder import write_run_folder
 from rig_io.synthetic import make_raw_run
 from tests.cleanroom import riglog
@@ -65,24 +65,26 @@ def test_one_rig_in_two_units_or_two_quantities_is_refused_and_one_kind_is_not()
     with pytest.raises(discrepancy.DiscrepancyError,
                        match=r"^source mixes output units: tsm-bench \(1 run, output mm\) and "
                              r"tsm-bench \(2 runs, output deg\)"):
-        discrepancy.check_one_kind({"a": _meta("tsm-bench", "mm"), "b": _meta("tsm-bench", "deg"),
-                                    "c": _meta("tsm-bench", "deg")})
+        discrepancy_data.check_one_kind({"a": _meta("tsm-bench", "mm"),
+                                         "b": _meta("tsm-bench", "deg"),
+                                         "c": _meta("tsm-bench", "deg")})
     with pytest.raises(discrepancy.DiscrepancyError, match=r"^source mixes output quantities: "):
-        discrepancy.check_one_kind({
+        discrepancy_data.check_one_kind({
             "a": _meta("bending-joint", "deg", "camera", "tip_angle_deg"),
             "b": _meta("bending-joint", "deg")})
     # the output encoder and a tracker measuring the same quantity are one kind
-    discrepancy.check_one_kind({"a": _meta("tsm-bench", "mm"),
-                                "b": _meta("tsm-bench", "mm", "tracker", "output_mm")})
+    discrepancy_data.check_one_kind({"a": _meta("tsm-bench", "mm"),
+                                     "b": _meta("tsm-bench", "mm", "tracker", "output_mm")})
 
 
 def test_runs_of_two_rigs_given_directly_are_never_pooled() -> None:
     import numpy as np
 
+    from hysteresis.discrepancy.analysis import analyse
     from hysteresis.discrepancy.runs import RunData
 
     t = np.arange(50) * 0.1
     runs = [RunData(f"r{i}", t, np.sin(t), np.sin(t), config={"rig": rig})
             for i, rig in enumerate(("tsm-bench", "bending-joint"))]
     with pytest.raises(discrepancy.DiscrepancyError, match="source mixes rigs: tsm-bench"):
-        discrepancy.analyse(runs, auto_families={"linear": {}})
+        analyse(runs, auto_families={"linear": {}})

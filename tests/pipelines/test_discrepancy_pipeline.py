@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 from omegaconf import OmegaConf
 
-from pipelines.discrepancy import DiscrepancyError, run
+from pipelines.discrepancy import DiscrepancyError, stage
 from tests.pipelines.pipeline_data import mlflow_store
 
 REPO = Path(__file__).resolve().parents[2]
@@ -58,7 +58,7 @@ def test_stage_names_the_hidden_effect_from_raw_run_folders(raw_source: Path, tm
     before = sorted(p.relative_to(raw_source) for p in raw_source.rglob("*"))
     out = tmp_path / "reports" / "discrepancy.json"
     uri = f"sqlite:///{mlflow_store(tmp_path)}"  # initialised: migrations are not tested here
-    rep = run(cfg(raw_source, out, base_family="gamma",
+    rep = stage(cfg(raw_source, out, base_family="gamma",
                   tracking={"enabled": True, "uri": uri,
                             "artifact_location": (tmp_path / "art").as_uri(),
                             "experiment": "discrepancy-test"}))
@@ -93,7 +93,7 @@ def test_stage_names_the_hidden_effect_from_raw_run_folders(raw_source: Path, tm
 
 def test_stage_rejects_a_missing_source(tmp_path: Path):
     with pytest.raises(DiscrepancyError, match="does not exist"):
-        run(cfg(tmp_path / "nope", tmp_path / "r.json"))
+        stage(cfg(tmp_path / "nope", tmp_path / "r.json"))
 
 
 def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: Path,
@@ -102,7 +102,7 @@ def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: P
         OmegaConf.load(REPO / "conf" / "importer" / "tendon_catheter.yaml"))
     out = tmp_path / "catheter.json"
     # Gamma with free weights and an offset: the catheter maps mm of tendon to degrees.
-    rep = run(cfg(catheter_dir, out, importer=mapping, base_family="gamma",
+    rep = stage(cfg(catheter_dir, out, importer=mapping, base_family="gamma",
                   base_params={"constraint": "free", "fit_offset": True}, ukf_evidence=True,
                   plots=False))  # the stage's plots: the test above
     assert rep["summary"]["identification_runs"][0].count("data_1_") == 5
@@ -119,7 +119,7 @@ def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: P
 
 
 def test_headline_names_what_the_load_cells_show_but_the_model_already_reproduces():
-    from pipelines.discrepancy import headline
+    from hysteresis.discrepancy.headline import headline
 
     rep: dict[str, Any] = {
         "base_family": "gamma",
@@ -144,3 +144,14 @@ def test_headline_names_what_the_load_cells_show_but_the_model_already_reproduce
     line = headline(rep)
     assert line.startswith("unexplained") and "9.0x the noise floor" in line
     assert "tried: drift, time_delay" in line and "no missing effect" not in line
+
+
+def test_the_discrepancy_stages_look_up_no_setting_by_key() -> None:
+    """Their settings are typed objects: a setting is an attribute (a misspelt one fails the
+    type check), never a ``cfg["..."]`` or ``cfg.get(...)`` found only when reached."""
+    import re
+
+    for name in ("discrepancy", "discrepancy_study", "discrepancy_data", "discrepancy_plots",
+                 "compile_kernels"):
+        text = (REPO / "pipelines" / f"{name}.py").read_text(encoding="utf-8")
+        assert not re.search(r"\bcfg(\[|\.get\()", text), name

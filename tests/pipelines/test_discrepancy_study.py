@@ -10,6 +10,7 @@ from hydra import compose, initialize_config_dir
 
 from pipelines import discrepancy_study as study
 from pipelines.common import CONF_DIR, to_container
+from pipelines.schemas import StudyExpectation
 from tests.pipelines.pipeline_data import mlflow_store
 
 # the detection study end to end: `make test-fast` leaves these out
@@ -111,13 +112,14 @@ def test_shortfalls_name_each_expectation_the_study_missed() -> None:
         {"label": "asymmetry 2 + drift 2", "pair": "a", "named": ["drift", "asymmetry"],
          "measured": [], "all_named": True, "reduction": 0.3},
     ]
-    expect = [{"effect": "drift", "strength": 1.0, "pair": "a", "outcome": "halved"},
-              {"effect": "drift", "strength": 2.0, "pair": "a", "outcome": "halved"},
-              {"effect": "drift", "strength": 1.0, "pair": "a", "outcome": "named",
-               "min_reduction": 0.45},
-              {"effect": "time_delay", "strength": 1.0, "pair": "a", "outcome": "halved"},
-              {"effect": "saturation", "strength": 0.5, "pair": "a", "outcome": "clean"},
-              {"effect": "drift", "strength": 4.0, "pair": "a", "outcome": "halved"}]  # not run
+    rows = [{"effect": "drift", "strength": 1.0, "pair": "a", "outcome": "halved"},
+            {"effect": "drift", "strength": 2.0, "pair": "a", "outcome": "halved"},
+            {"effect": "drift", "strength": 1.0, "pair": "a", "outcome": "named",
+             "min_reduction": 0.45},
+            {"effect": "time_delay", "strength": 1.0, "pair": "a", "outcome": "halved"},
+            {"effect": "saturation", "strength": 0.5, "pair": "a", "outcome": "clean"},
+            {"effect": "drift", "strength": 4.0, "pair": "a", "outcome": "halved"}]  # not run
+    expect = [StudyExpectation(**e) for e in rows]
     missed = study.shortfalls(cases, combos, expect, combination_reduction=0.4)
     assert missed == [
         "clean on pair b: named ['drift']",
@@ -146,7 +148,7 @@ def test_one_hidden_effect_end_to_end_logged_and_checked(tmp_path: Path) -> None
     cfg["strengths"]["time_delay"] = [1.0]
     with pytest.raises(study.StudyError, match=r"fell short of 1 expectation.*\n  time_delay 1 "
                        r"on pair a: expected no effect, named \['time_delay'"):
-        study.run(cfg)
+        study.stage(cfg)
     out = tmp_path / "data" / "reports"
     doc = json.loads((out / "discrepancy_study.json").read_text())
     cases = doc["cases"]

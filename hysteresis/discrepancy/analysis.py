@@ -1,0 +1,163 @@
+"""The discrepancy stage's computation: choose the base, run the workflow, check a given base
+against the standard families, write the headline. Runs in, ``(report, full)`` out; no files,
+no MLflow (``pipelines/discrepancy.py`` is the edge that reads the source and writes them)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from hysteresis.base import HysteresisError
+from hysteresis.discrepancy.base_check import Workflow, base_misfit, second_opinion
+from hysteresis.discrepancy.errors import DiscrepancyError
+from hysteresis.discrepancy.headline import headline
+from hysteresis.discrepancy.ranking import pick_base, rank_bases
+from hysteresis.discrepancy.runs import RunData, check_one_rig
+from hysteresis.discrepancy.workflow import (
+    WorkflowSettings,
+    base_factory_for,
+    group_runs,
+    run_workflow,
+    strip_private,
+)
+
+log = logging.getLogger(__name__)
+
+
+def analyse(runs: list[RunData], *, base_family: str = "auto",
+            base_params: Mapping[str, Any] | None = None,
+            auto_families: Mapping[str, Mapping[str, Any]],
+            settings: WorkflowSettings | None = None, ukf_evidence: bool = False,
+            base_check: bool = True, base_misfit_factor: float = 1.5,
+            base_misfit_fallback: bool = True, max_bases: int = 2,
+            base_retry_factor: float = 1.5,
+            ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The stage's computation, no I/O: choose the base, run the workflow, check a given
+    base against the auto families. Returns ``(report, full)``: the JSON-ready report and the
+    workflow's full result (with the evaluations and groups the plots need).
+
+    ``auto``: the workflow runs on the best of ``auto_families`` (plain held-out RMSE), and
+    again on the next best, up to ``max_bases``, while the result is neither clean nor
+    explained to within ``base_retry_factor`` x the noise floor; the base whose model with
+    its terms predicts the held-out runs best is kept (:func:`.ranking.pick_base`). The plain
+    ranking alone confounds the effect with the family: a family that bends to a hidden drift
+    or stop wins plain and then leaves half of it, where the family that matches the mechanism
+    plus the term explains it.
+
+    A given base is checked against the best of ``auto_families`` (``base_check``): with
+    ``base_misfit_fallback`` by :func:`.base_check.second_opinion` (the best family answers
+    when its model with its terms predicts clearly better; ``given_base`` keeps the given
+    base's answer), else by :func:`.base_check.base_misfit` (flagged only). Terms added to a
+    base that cannot take the loop's shape stand in for the base's misfit, and the answer
+    would depend on the base and not on the source."""
+    st = settings or WorkflowSettings()
+    try:
+        check_one_rig(runs)
+    except HysteresisError as err:
+        raise DiscrepancyError(str(err)) from None
+    workflow = _workflow_on(runs, st, _model_error(runs) if ukf_evidence else None)
+    auto_scores: dict[str, float] = {}
+    tried: list[dict[str, Any]] = []
+    if base_family == "auto":
+        full, params, auto_scores, tried = _auto_base(
+            workflow, runs, auto_families, max_bases=max_bases,
+            retry_factor=base_retry_factor, min_gain=st.min_relative_gain)
+    else:
+        params = dict(base_params or {})
+        full = workflow(base_family, params)
+    report = _report(full, params, auto_scores, tried)
+    if not auto_scores and base_check and base_misfit_fallback:
+        report, full = second_opinion(
+            runs, report, full, workflow, auto_families, base=base_family, params=params,
+            factor=base_misfit_factor, retry_factor=base_retry_factor,
+            min_gain=st.min_relative_gain)
+    elif not auto_scores and base_check:
+        report["base_misfit"] = base_misfit(runs, report, auto_families,
+                                            factor=base_misfit_factor)
+    report["headline"] = headline(report)
+    return report, full
+
+
+def _workflow_on(runs: list[RunData], st: WorkflowSettings,
+                 model_error: dict[str, np.ndarray] | None) -> Workflow:
+    """The workflow on ``runs`` as a function of the base (family name, parameters)."""
+
+    def workflow(name: str, params: Mapping[str, Any]) -> dict[str, Any]:
+        try:
+            factory = base_factory_for(name, **params)
+        except HysteresisError as err:
+            raise DiscrepancyError(str(err)) from None
+        return run_workflow(runs, factory, base_name=name, settings=st, model_error=model_error)
+
+    return workflow
+
+
+def _auto_base(workflow: Workflow, runs: list[RunData],
+               families: Mapping[str, Mapping[str, Any]], *, max_bases: int,
+               retry_factor: float, min_gain: float
+               ) -> tuple[dict[str, Any], dict[str, Any], dict[str, float],
+                          list[dict[str, Any]]]:
+    """``base_family=auto``: the workflow on the best plain families in turn, while the answer
+    is neither clean nor explained to ``retry_factor`` x the noise floor; returns (the kept
+    base's full result, its parameters, the plain scores, what each base tried answered)."""
+    _, _, scores, specs = rank_bases(runs, families)
+    results: list[tuple[str, dict[str, Any]]] = []
+    tried: list[dict[str, Any]] = []
+    for label in sorted(scores, key=scores.__getitem__)[:max(1, max_bases)]:
+        res = workflow(*specs[label])
+        results.append((label, res))
+        tried.append({"base": label, "verdict": res["verdict"],
+                      "effects": [e["name"] for e in res["effects"]],
+                      "heldout_rmse_after": res["summary"]["heldout_rmse_after"],
+                      "rmse_over_noise": res["residual"]["rmse_over_noise"]})
+        if res["verdict"] == "no_missing_effect" \
+                or res["residual"]["rmse_over_noise"] <= retry_factor:
+            break
+    label, full = pick_base(results, min_gain=min_gain)
+    return full, specs[label][1], scores, tried
+
+
+def _report(full: dict[str, Any], params: dict[str, Any], auto_scores: dict[str, float],
+            tried: list[dict[str, Any]]) -> dict[str, Any]:
+    """The JSON-ready report of the kept base's result: its parameters, the plain scores
+    (``auto``) and the bases tried; ``base_misfit`` and ``given_base`` still empty."""
+    report = strip_private(full)
+    report["base_params"] = params
+    report["base_selection"] = auto_scores or None
+    report["bases_tried"] = tried or None
+    if auto_scores:
+        best_plain = min(auto_scores.values())
+        after = float(report["summary"]["heldout_rmse_after"])
+        report["summary"]["heldout_rmse_best_plain"] = best_plain
+        report["summary"]["heldout_reduction_vs_best_plain"] = \
+            1.0 - after / best_plain if best_plain > 0 else 0.0
+    report["base_misfit"] = None
+    report["given_base"] = None
+    return report
+
+
+def _model_error(runs: list[RunData]) -> dict[str, np.ndarray] | None:
+    """:func:`ukf_model_error`, or ``None`` with a warning when it cannot be had: it is
+    evidence only, never fatal."""
+    try:
+        return ukf_model_error(runs)
+    except HysteresisError as err:
+        log.warning("UKF model-error evidence skipped: %s", err)
+        return None
+
+
+def ukf_model_error(runs: list[RunData]) -> dict[str, np.ndarray]:
+    """f_h of seed 000's active-modelling UKF around a Coleman-Hodgdon reference model, per
+    configuration's identification record (the signal the winner's term is regressed on)."""
+    from hysteresis.coleman_hodgdon import ColemanHodgdonModel
+    from hysteresis.ukf import ActiveModelUKF
+
+    out: dict[str, np.ndarray] = {}
+    for g in group_runs(runs):
+        ch = ColemanHodgdonModel(method="varpro").fit(g.ident.u, g.ident.y)
+        res = ActiveModelUKF(ch, dt=g.ident.dt).run(g.ident.u, g.ident.y)
+        out[g.ident.run_id] = np.asarray(res.f_h, dtype=np.float64)
+    return out

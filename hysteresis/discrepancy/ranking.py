@@ -1,0 +1,76 @@
+"""Which base family answers: every standard family scored by its plain held-out RMSE
+(:func:`rank_bases`), and of the workflow's answers on several bases the one whose model with
+its terms predicts the held-out runs best (:func:`pick_base`). Pure: runs in, scores out."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from hysteresis.discrepancy.effects import ComposedModel
+from hysteresis.discrepancy.errors import DiscrepancyError
+from hysteresis.discrepancy.runs import RunData
+from hysteresis.discrepancy.workflow import base_factory_for, evaluate, group_runs
+
+log = logging.getLogger(__name__)
+
+#: A family as the ranking keeps it: (registered or local family name, its parameters).
+Spec = tuple[str, dict[str, Any]]
+
+
+def rank_bases(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
+               ) -> tuple[str, dict[str, Any], dict[str, float], dict[str, Spec]]:
+    """Every family of ``families`` scored by its plain held-out RMSE: (best family, its
+    parameters, scores by label, (family, parameters) by label)."""
+    groups = group_runs(runs)
+    scores: dict[str, float] = {}
+    specs: dict[str, Spec] = {}
+    for label, spec in families.items():
+        params = dict(spec or {})
+        name = str(params.pop("family", label))
+        try:
+            factory = base_factory_for(name, **params)
+            models = {g.key: ComposedModel(factory).fit(g.ident) for g in groups}
+            _, e_h = evaluate(models, groups).errors(groups)
+            score = float(np.sqrt(np.mean(e_h**2)))
+        except Exception as err:  # a family that cannot fit this data is simply not chosen
+            log.warning("base family %s skipped: %s", label, err)
+            continue
+        if math.isfinite(score):
+            scores[label] = score
+            specs[label] = (name, params)
+    if not scores:
+        raise DiscrepancyError("no base family could be fitted to this source")
+    best = min(scores, key=scores.__getitem__)
+    return specs[best][0], specs[best][1], scores, specs
+
+
+def choose_base(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
+                ) -> tuple[str, dict[str, Any], dict[str, float]]:
+    """The family of ``families`` with the lowest held-out RMSE (the best standard family)."""
+    name, params, scores, _ = rank_bases(runs, families)
+    return name, params, scores
+
+
+def pick_base(results: Sequence[tuple[str, dict[str, Any]]], *, min_gain: float
+              ) -> tuple[str, dict[str, Any]]:
+    """Of the workflow's results on several bases (best plain base first), the one whose final
+    model predicts the held-out runs best. A later base must beat the first by ``min_gain``
+    (the bar a term must clear) so a near tie keeps the best plain family, and one that adds
+    terms where the first found nothing to add is not taken: a family that fits the source
+    worse may name its own misfit."""
+    first_label, first = results[0]
+    best_label, best = first_label, first
+    for label, res in results[1:]:
+        if not res["effects"] and first["effects"]:
+            continue
+        if first["verdict"] == "no_missing_effect":
+            break
+        after = float(res["summary"]["heldout_rmse_after"])
+        if after < (1.0 - min_gain) * float(best["summary"]["heldout_rmse_after"]):
+            best_label, best = label, res
+    return best_label, best
