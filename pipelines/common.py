@@ -118,8 +118,9 @@ class Paths:
 
 
 def to_container(cfg: Any) -> dict[str, Any]:
-    """A DictConfig (or plain mapping) as a resolved plain dict, without the ``hydra`` node
-    (a stage's settings are :func:`pipelines.schemas.settings` instead)."""
+    """A DictConfig (or plain mapping) as a resolved plain dict, without the ``hydra`` node:
+    for looking at a composed config (tests, benches); no stage reads its settings this way
+    (they are :func:`pipelines.schemas.settings`)."""
     from omegaconf import DictConfig, OmegaConf
 
     if isinstance(cfg, DictConfig):

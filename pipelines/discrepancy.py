@@ -37,6 +37,7 @@ from hysteresis.discrepancy.workflow import WorkflowSettings
 from pipelines import schemas
 from pipelines.discrepancy_data import ingest_source, runs_from_dataset
 from pipelines.discrepancy_plots import loop_figures, save_figures
+from pipelines.skeleton import Stage, TrackContext
 from rig_io.atomic import (
     check_output,
     clean_leftovers,
@@ -252,38 +253,27 @@ def _params(report: dict[str, Any], s: Settings) -> dict[str, Any]:
     return params
 
 
+def _run_and_write(s: Settings) -> Result:
+    result = run(s)
+    write(result, s)
+    log.info("%s", result.report["headline"])
+    return result
+
+
+def _track(ctx: TrackContext, s: Settings, result: Result) -> None:
+    track(ctx.tracker, result, s)
+
+
+STAGE = Stage("discrepancy", Settings, run=_run_and_write, track=_track, convert=settings,
+              errors=(DiscrepancyError,), announce=lambda s, r: str(r.report["headline"]))
+
+
 def stage(cfg: Any) -> dict[str, Any]:
     """The whole stage from a config (:func:`run`, :func:`write`, :func:`track`); returns the
     report as written."""
-    from pipelines.tracking import stage_tracker
-
-    s = settings(cfg)
-    result = run(s)
-    write(result, s)
-    tracker = stage_tracker({"tracking": s.tracking, "paths": s.paths})
-    if tracker is not None:
-        track(tracker, result, s)
-    log.info("%s", result.report["headline"])
+    result: Result = STAGE.execute(cfg)
     return result.report
 
 
-def _main() -> None:
-    import hydra
-    from omegaconf import DictConfig
-
-    from pipelines.common import run_stage, to_container
-
-    @hydra.main(config_path="../conf", config_name="discrepancy", version_base="1.3")
-    def main(cfg: DictConfig) -> None:
-        rep = run_stage("discrepancy", lambda: stage(to_container(cfg)),
-                        errors=(DiscrepancyError,))
-        print(rep["headline"])
-
-    main()
-
-
 if __name__ == "__main__":
-    from pipelines.cli import guard
-
-    guard("discrepancy")
-    _main()
+    STAGE.main()

@@ -41,6 +41,7 @@ from hysteresis.discrepancy.workflow import (
 )
 from pipelines import schemas
 from pipelines.schemas import StudyExpectation
+from pipelines.skeleton import Stage, TrackContext
 from rig_io.atomic import write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -479,25 +480,42 @@ def track(tracker: Any, result: StudyResult, s: Settings, files: Sequence[Path])
             tracker.log_artifact(run_id, f, "reports")
 
 
-def stage(cfg: Any) -> list[dict[str, Any]]:
-    """The whole study from a config (:func:`run`, :func:`write`, :func:`track`), then its
-    expectations: a shortfall raises :class:`StudyError` naming each case, after the tables
-    are written. Returns the single-effect cases."""
-    from pipelines.tracking import stage_tracker
-
-    s = settings(cfg)
+def _run_and_write(s: Settings) -> StudyResult:
     result = run(s)
     files = write(result, s)
-    tracker = stage_tracker({"tracking": s.tracking, "paths": s.paths})
-    if tracker is not None:
-        track(tracker, result, s, files)
     log.info("wrote %s and %s (%d cases, %.0f s)", *files, len(result.cases), result.elapsed_s)
+    return result
+
+
+def _track(ctx: TrackContext, s: Settings, result: StudyResult) -> None:
+    track(ctx.tracker, result, s, list(out_paths(s)))
+
+
+def _verdict(s: Settings, result: StudyResult) -> None:
+    """The study's expectations, after the tables are written and tracked: a shortfall raises
+    :class:`StudyError` naming each case."""
     _warn_unchecked(s.expect, result.cases)
     missed = shortfalls(result.cases, result.combos, s.expect,
                         combination_reduction=s.expect_combination_reduction)
     if missed:
         raise StudyError(f"the study fell short of {len(missed)} expectation(s) "
-                         f"(tables written to {files[1]}):\n  " + "\n  ".join(missed))
+                         f"(tables written to {out_paths(s)[1]}):\n  " + "\n  ".join(missed))
+
+
+def _summary(s: Settings, result: StudyResult) -> str:
+    ok = sum(bool(c["halved"]) for c in result.cases)
+    return f"{len(result.cases)} cases; {ok} named first and halved; table: {out_paths(s)[1]}"
+
+
+STAGE = Stage("discrepancy_study", Settings, run=_run_and_write, track=_track,
+              convert=settings, after=_verdict, errors=(StudyError,), announce=_summary)
+
+
+def stage(cfg: Any) -> list[dict[str, Any]]:
+    """The whole study from a config (:func:`run`, :func:`write`, :func:`track`), then its
+    expectations: a shortfall raises :class:`StudyError` naming each case, after the tables
+    are written. Returns the single-effect cases."""
+    result: StudyResult = STAGE.execute(cfg)
     return result.cases
 
 
@@ -512,23 +530,5 @@ def _warn_unchecked(expect: Sequence[StudyExpectation], cases: Sequence[Mapping[
                                               f"pair {e.pair}" for e in unchecked))
 
 
-def _main() -> None:
-    import hydra
-    from omegaconf import DictConfig
-
-    from pipelines.common import run_stage, to_container
-
-    @hydra.main(config_path="../conf", config_name="discrepancy_study", version_base="1.3")
-    def main(cfg: DictConfig) -> None:
-        cases = run_stage("discrepancy_study", lambda: stage(to_container(cfg)))
-        ok = sum(bool(c["halved"]) for c in cases)
-        print(f"{len(cases)} cases; {ok} named first and halved; table: {cfg.out}.md")
-
-    main()
-
-
 if __name__ == "__main__":
-    from pipelines.cli import guard
-
-    guard("discrepancy_study")
-    _main()
+    STAGE.main()

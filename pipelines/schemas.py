@@ -10,13 +10,12 @@ of being ignored. A setting whose meaning lives in a dataclass of the library is
 dataclass (``sync``: :class:`rig_io.synchronise.SyncOptions`, the discrepancy workflow's
 knobs: :class:`WorkflowSettings`). A free mapping (``auto_families``, the study's
 ``strengths``) is a ``dict[str, Any]`` field: its keys are the user's, and a value given for
-it replaces the default mapping whole (:func:`with_defaults`).
+it replaces the default mapping whole (:func:`settings`).
 
 Config groups (``paths``, ``tracking``, ``family``, ``rig``, ``campaign``, ...) stay groups:
 their fields are typed ``Any``. A stage's Hydra-free core converts its config once with
 :func:`settings` (a composed config and a hand-written mapping alike get the same defaults
-and checks) and reads attributes; :func:`with_defaults` (a plain dict) serves the stages not
-yet moved to that shape.
+and checks) and reads attributes.
 """
 
 from __future__ import annotations
@@ -551,29 +550,6 @@ def schema_node(schema: type[Any]) -> DictConfig:
     assert isinstance(node, DictConfig)
     _writable(node)
     return node
-
-
-def with_defaults(schema: type[Any], cfg: Mapping[str, Any]) -> dict[str, Any]:
-    """``cfg`` merged over ``schema``'s defaults and checked against its types, as a plain dict.
-
-    What a stage's Hydra-free ``run`` works on: a composed config comes back unchanged, a
-    hand-written one (tests, ``run_all``) gets every setting it leaves out. Keys the schema
-    does not know are kept, so one plain config may serve several stages; group nodes left
-    unset (``paths`` ...) are left out. A typed node merges field by field
-    (``{"plots": {"dpi": 30}}`` keeps the other plot settings); a free mapping given
-    (``auto_families``, the study's ``strengths``) replaces its default whole, as the value
-    it is.
-    A mistyped value raises :class:`omegaconf.errors.ValidationError` (a ``ValueError``)
-    naming the key.
-    """
-    node = schema_node(schema)
-    OmegaConf.set_struct(node, False)
-    _clear_given_mappings(node, cfg)
-    node.merge_with(dict(cfg))
-    unset = {str(k) for k in node if OmegaConf.is_missing(node, str(k))}
-    plain = OmegaConf.to_container(node, resolve=True)
-    assert isinstance(plain, dict)
-    return {str(k): v for k, v in plain.items() if str(k) not in unset}
 
 
 def settings(schema: type[T], cfg: Any) -> T:

@@ -44,13 +44,20 @@ S = TypeVar("S")
 R = TypeVar("R")
 
 
+@dataclass
+class _Root:
+    """The one path the tracker needs (a hand-written config may give ``paths.root`` only)."""
+
+    root: str = "."
+
+
 def tracker_for(settings: Any) -> Any:
     """The MLflow tracker of a stage's settings: its ``tracking`` group (not given, as in a
     hand-written config, or ``enabled: false`` = off) with the store under ``paths.root``."""
     from pipelines import tracking
 
     group = settings.tracking if isinstance(settings.tracking, Mapping) else {"enabled": False}
-    root = Paths.from_config(settings.paths).root
+    root = Path(schemas.settings(_Root, settings.paths or {}).root).expanduser().resolve()
     return tracking.Tracker(tracking.settings_from_config(group, root=root))
 
 
@@ -60,9 +67,15 @@ class TrackContext:
 
     stage: str
     tracker: Any
-    paths: Paths
+    #: the settings' ``paths`` group as given (a hand-written config may name only the root)
+    paths_given: Any
     #: epoch seconds when the command started: the stage's parent run spans the work
     started: float
+
+    @property
+    def paths(self) -> Paths:
+        """The project's folders (every one named by the composed config)."""
+        return Paths.from_config(self.paths_given)
 
     @contextmanager
     def parent_run(self, **tags: str) -> Iterator[str]:
@@ -103,6 +116,14 @@ class Stage(Generic[S, R]):
     #: the stage's own errors ended as one line and exit 2 (besides PipelineError and
     #: RigIOError)
     errors: tuple[type[Exception], ...] = field(default=())
+    #: the conversion of a config into the settings, where the stage words a missing setting
+    #: its own way (default :func:`pipelines.schemas.settings`)
+    convert: Callable[[Any], S] | None = None
+    #: after tracking: the stage's verdict on its result (raises when the result falls short;
+    #: the result is written and tracked first)
+    after: Callable[[S, R], None] | None = None
+    #: what the command prints when done (one line for the person at the terminal)
+    announce: Callable[[S, R], str] | None = None
 
     @property
     def config_name(self) -> str:
@@ -111,14 +132,17 @@ class Stage(Generic[S, R]):
     def execute(self, cfg: Any) -> R:
         """Settings once, tracker once, core, then tracking (``cfg``: composed or plain)."""
         started = time.time()
-        settings = schemas.settings(self.schema, cfg)
+        settings = self.convert(cfg) if self.convert else schemas.settings(self.schema, cfg)
         tracker = tracker_for(settings) if self.track is not None else None
         if tracker is not None and tracker.enabled:
             tracker.init_store()  # a locked or damaged store stops the stage before the work
         result = self.run(settings)
         if tracker is not None and tracker.enabled and self.track is not None:
-            paths = Paths.from_config(settings.paths)  # type: ignore[attr-defined]
-            self.track(TrackContext(self.name, tracker, paths, started), settings, result)
+            self.track(TrackContext(self.name, tracker,
+                                    settings.paths, started),  # type: ignore[attr-defined]
+                       settings, result)
+        if self.after is not None:
+            self.after(settings, result)
         return result
 
     def main(self) -> None:
@@ -130,7 +154,10 @@ class Stage(Generic[S, R]):
         guard(self.config_name)
 
         def entry(cfg: Any) -> None:
-            run_stage(self.name, lambda: self.execute(cfg), self.errors)
+            result = run_stage(self.name, lambda: self.execute(cfg), self.errors)
+            if self.announce is not None:
+                print(self.announce(self.convert(cfg) if self.convert
+                                    else schemas.settings(self.schema, cfg), result))
 
         # Hydra names the job (its log file, a sweep's parent run) after the task
         # function's module: the command's (``pipelines.fit`` -> ``fit``), not this one

@@ -122,32 +122,6 @@ def settings_from_config(tracking: Any, *, root: str | Path) -> TrackingSettings
     )
 
 
-@dataclass
-class _StageEdge:
-    """The two groups of a stage config a tracker is built from."""
-
-    paths: Any = None
-    tracking: Any = None
-
-
-@dataclass
-class _Root:
-    root: str = "."
-
-
-def stage_tracker(cfg: Any) -> Tracker | None:
-    """The tracker for a stage's plain config (its ``tracking`` group and ``paths.root``), or
-    ``None`` when the config does not switch tracking on. The stages built on
-    :class:`pipelines.skeleton.Stage` get theirs from :func:`pipelines.skeleton.tracker_for`."""
-    from pipelines import schemas
-
-    edge = schemas.settings(_StageEdge, cfg)
-    if not edge.tracking or not tracking_group(edge.tracking).enabled:
-        return None
-    root = schemas.settings(_Root, edge.paths or {}).root
-    return Tracker(settings_from_config(edge.tracking, root=root))
-
-
 # --------------------------------------------------------------------------------------
 # retries
 # --------------------------------------------------------------------------------------

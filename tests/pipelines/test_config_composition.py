@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import asdict
 from pathlib import Path
 
@@ -193,20 +194,22 @@ def test_typed_overrides_reach_the_stage() -> None:
 
 
 def test_a_hand_written_stage_config_gets_the_schema_defaults_and_checks() -> None:
+    from dataclasses import asdict
+
     from omegaconf.errors import ValidationError
 
-    from pipelines.schemas import FitConfig, ReportConfig, with_defaults
+    from pipelines.schemas import ConfigurationSelection, FitConfig, ReportConfig, settings
 
-    cfg = with_defaults(FitConfig, {"paths": {"root": "x"}, "config": {"radius_mm": 30},
-                                    "heldout": []})
-    assert cfg["config"] == {"rig": None, "curve_angle_deg": None, "radius_mm": 30}
-    assert cfg["fit_excitations"] == ["sine_decay"] and cfg["families"] == "all"
-    assert cfg["heldout"] == [] and cfg["paths"] == {"root": "x"}  # other keys pass through
-    assert "tracking" not in cfg  # a group left unset is left out
-    assert with_defaults(ReportConfig, {"plots": {"dpi": 30}})["plots"] == {
+    cfg = settings(FitConfig, {"paths": {"root": "x"}, "config": {"radius_mm": 30},
+                               "heldout": []})
+    assert cfg.config == ConfigurationSelection(rig=None, curve_angle_deg=None, radius_mm=30)
+    assert cfg.fit_excitations == ["sine_decay"] and cfg.families == "all"
+    assert cfg.paths == {"root": "x"} and not hasattr(cfg, "heldout")  # validate's key
+    assert cfg.tracking is None  # a group left unset
+    assert asdict(settings(ReportConfig, {"plots": {"dpi": 30}}).plots) == {
         "per_configuration": True, "dpi": 30, "max_points": 1500}
     with pytest.raises(ValidationError, match="n_jobs"):
-        with_defaults(FitConfig, {"n_jobs": "two"})
+        settings(FitConfig, {"n_jobs": "two"})
 
 
 def test_unseen_shape_estimator_defaults_are_the_models() -> None:
@@ -249,11 +252,11 @@ def test_compensation_experiments_compose_and_validate(experiment: str) -> None:
 
     cfg = _compose("compensate", [f"experiment={experiment}", "paths.root=/tmp/somewhere"])
     # the composed config is the schema's node: merging it into the schema (struct) changes
-    # nothing, and a plain copy through with_defaults comes back equal
+    # nothing, and the typed settings of a plain copy come back equal to it
     typed = OmegaConf.merge(schemas.schema_node(schemas.CompensateConfig), cfg)
     assert OmegaConf.to_container(typed, resolve=True) == to_container(cfg)
     plain = to_container(cfg)
-    assert schemas.with_defaults(schemas.CompensateConfig, plain) == plain
+    assert dataclasses.asdict(schemas.settings(schemas.CompensateConfig, plain)) == plain
     assert plain["out_dir"] == "/tmp/somewhere/data/reports/compensation"
     defaults = _schema_defaults("compensate")
     s1, s2, s0 = plain["seed001"], plain["seed002"], plain["seed000"]
@@ -281,20 +284,24 @@ def test_compensation_experiments_compose_and_validate(experiment: str) -> None:
 
 
 def test_a_hand_written_compensation_config_gets_the_schema_defaults_and_checks() -> None:
+    from dataclasses import asdict
+
     from omegaconf.errors import ValidationError
 
     from pipelines.registry import ALIAS
-    from pipelines.schemas import CompensateConfig, with_defaults
+    from pipelines.schemas import CompensateConfig, settings
 
-    cfg = with_defaults(CompensateConfig, {"out_dir": "x", "seed001": {"shapes": {"A": [90, 30]}},
-                                           "seed000": {"tracking": {"kp": 0.1}}})
-    assert cfg["seed001"]["shapes"] == {"A": [90, 30]}  # a free mapping replaces the default
-    assert cfg["seed001"]["all_configurations"] == "quick" and cfg["seed002"]["trials"] == 2
-    assert cfg["seed000"]["tracking"]["kp"] == 0.1 and cfg["seed000"]["tracking"]["kd"] == 0.05
-    assert cfg["seed000"]["camera"] == {"rate_hz": 30.0, "latency_s": 0.0, "noise_std": 0.2}
-    assert cfg["seed001"]["ours"]["registry_alias"] == ALIAS
+    cfg = settings(CompensateConfig, {"out_dir": "x", "report": "r.md",
+                                      "seed001": {"shapes": {"A": [90, 30]}},
+                                      "seed000": {"tracking": {"kp": 0.1}}})
+    assert cfg.seed001.shapes == {"A": [90, 30]}  # a free mapping replaces the default
+    assert cfg.seed001.all_configurations == "quick" and cfg.seed002.trials == 2
+    assert cfg.seed000.tracking.kp == 0.1 and cfg.seed000.tracking.kd == 0.05
+    assert asdict(cfg.seed000.camera) == {"rate_hz": 30.0, "latency_s": 0.0, "noise_std": 0.2}
+    assert cfg.seed001.ours.registry_alias == ALIAS
     with pytest.raises(ValidationError, match="trials"):
-        with_defaults(CompensateConfig, {"seed002": {"trials": "two"}})
+        settings(CompensateConfig, {"out_dir": "x", "report": "r.md",
+                                    "seed002": {"trials": "two"}})
 
 
 #: The discrepancy stage, its study and the whole pipeline: config name -> (schema, settings
@@ -319,15 +326,15 @@ def test_entry_point_config_validates_against_its_schema(name: str) -> None:
     assert schemas.STAGE_SCHEMAS[name] is schema
     cfg = _compose(name, ["paths.root=/tmp/somewhere"])
     # the composed config is the schema's node: merging it into the schema (struct: an unknown
-    # key would fail) changes nothing, and a plain copy through with_defaults comes back equal
+    # key would fail) changes nothing, and the typed settings of a plain copy come back equal
     typed = OmegaConf.merge(schemas.schema_node(schema), cfg)
     assert OmegaConf.to_container(typed, resolve=True) == to_container(cfg)
     plain = to_container(cfg)
-    assert schemas.with_defaults(schema, plain) == plain
+    assert dataclasses.asdict(schemas.settings(schema, plain)) == plain
     settings, mistyped = ENTRY_POINTS[name][1], ENTRY_POINTS[name][2]
     assert {k: plain[k] for k in settings} == settings
     with pytest.raises(ValidationError, match=next(iter(mistyped))):
-        schemas.with_defaults(schema, mistyped)
+        schemas.settings(schema, {**plain, **mistyped})
 
 
 @pytest.mark.parametrize(("name", "bad"), [
@@ -362,22 +369,25 @@ def test_entry_point_overrides_reach_their_settings() -> None:
 
 
 def test_a_hand_written_mapping_replaces_the_default_mapping_whole() -> None:
-    from pipelines.schemas import DiscrepancyConfig, DiscrepancyStudyConfig, with_defaults
+    from dataclasses import asdict
 
-    study = with_defaults(DiscrepancyStudyConfig, {"combinations": {"strengths": {}},
-                                                   "strengths": {"drift": [1.0]}})
+    from pipelines.schemas import DiscrepancyConfig, DiscrepancyStudyConfig, Signals, settings
+
+    study = settings(DiscrepancyStudyConfig, {"out": "x", "combinations": {"strengths": {}},
+                                              "strengths": {"drift": [1.0]}})
     # combinations is a typed node: its own free mapping is replaced, its other field kept
-    assert study["combinations"] == {"strengths": {}, "pairs_selected": ["a"]}
-    assert study["strengths"] == {"drift": [1.0]}
-    assert study["pairs_selected"] == ["a", "b", "c", "d", "e"] and study["workflow"] == {}
-    disc = with_defaults(DiscrepancyConfig, {"auto_families": {"gamma": {}},
-                                             "signals": {"input": "u"},
-                                             "workflow": {"max_effects": 2}})
-    assert disc["auto_families"] == {"gamma": {}}
+    assert asdict(study.combinations) == {"strengths": {}, "pairs_selected": ["a"]}
+    assert study.strengths == {"drift": [1.0]}
+    assert study.pairs_selected == ["a", "b", "c", "d", "e"] and study.workflow == {}
+    disc = settings(DiscrepancyConfig, {"source": "s", "report": "r.json",
+                                        "auto_families": {"gamma": {}},
+                                        "signals": {"input": "u"},
+                                        "workflow": {"max_effects": 2}})
+    assert disc.auto_families == {"gamma": {}}
     # typed nodes still merge field by field
-    assert disc["signals"] == {"input": "u", "output": "output"}
-    assert disc["workflow"]["max_effects"] == 2 and disc["workflow"]["noise_factor"] == 2.0
-    assert disc["importer"] is None and "source" not in disc  # a required value left unset
+    assert disc.signals == Signals(input="u", output="output")
+    assert disc.workflow.max_effects == 2 and disc.workflow.noise_factor == 2.0
+    assert disc.importer is None
 
 
 def test_a_hand_written_pipeline_config_forwards_the_schema_defaults(tmp_path: Path) -> None:
