@@ -918,48 +918,63 @@ def _fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: E
     best = int(np.argmin(sses))
     model = fits[best]
     if refine and effect.has_theta and len(grid) > 1:
-        # Refine the last component of theta between its grid neighbours (others fixed), from
-        # the best point of each of the ``refine_starts`` best prefixes (the other components).
-        def prefix_of(g: Any) -> tuple[Any, ...]:
-            return tuple(g[:-1]) if isinstance(g, tuple) else ()
-
-        # The first form's best prefixes, and the best point of every other form that comes
-        # near the best fit (a form's points do not take the first form's places).
-        starts: list[int] = []
-        order = [int(i) for i in np.argsort(sses, kind="stable")]
-        for i in order:
-            if effect.form(grid[i]) != effect.first_form:
-                continue
-            if all(prefix_of(grid[i]) != prefix_of(grid[j]) for j in starts):
-                starts.append(i)
-            if len(starts) == effect.refine_starts:
-                break
-        for form in {effect.form(g) for g in grid} - {effect.first_form}:
-            i = next(i for i in order if effect.form(grid[i]) == form)
-            if sses[i] <= FORM_REFINE_FACTOR * sses[best]:
-                starts.append(i)
-        best_sse = sses[best]
-        for i in starts:
-            th = grid[i]
-            prefix = prefix_of(th)
-            line = sorted(float(g[-1]) if isinstance(g, tuple) else float(g) for g in grid
-                          if prefix_of(g) == prefix)
-            last = float(th[-1]) if isinstance(th, tuple) else float(th)
-            k = line.index(last)
-            lo, hi = line[max(k - 1, 0)], line[min(k + 1, len(line) - 1)]
-            if hi <= lo:
-                continue
-
-            def make(x: float, th: Any = th, prefix: tuple[Any, ...] = prefix) -> Any:
-                return (*prefix, float(x)) if isinstance(th, tuple) else float(x)
-
-            res = minimize_scalar(lambda x, make=make: _sse(build(make(x)), ident),
-                                  bounds=(lo, hi), method="bounded",
-                                  options={"maxiter": 8, "xatol": 1e-3 * (hi - lo)})
-            if float(res.fun) < best_sse:
-                model, best_sse = build(make(float(res.x))), float(res.fun)
+        model = _refined(effect, grid, sses, model, build, ident)
     if screen is not None:
         return build(model.terms[-1].theta, base_factory)
+    return model
+
+
+def _prefix(g: Any) -> tuple[Any, ...]:
+    """Every component of a grid point but the last (the one refined)."""
+    return tuple(g[:-1]) if isinstance(g, tuple) else ()
+
+
+def _refine_starts(effect: Effect, grid: Sequence[Any], sses: Sequence[float]) -> list[int]:
+    """The grid points the refinement starts from: the first form's best point of each of its
+    ``refine_starts`` best prefixes (the other components), and the best point of every other
+    form that comes near the best fit (a form's points do not take the first form's places)."""
+    starts: list[int] = []
+    order = [int(i) for i in np.argsort(sses, kind="stable")]
+    for i in order:
+        if effect.form(grid[i]) != effect.first_form:
+            continue
+        if all(_prefix(grid[i]) != _prefix(grid[j]) for j in starts):
+            starts.append(i)
+        if len(starts) == effect.refine_starts:
+            break
+    best = order[0]
+    for form in {effect.form(g) for g in grid} - {effect.first_form}:
+        i = next(i for i in order if effect.form(grid[i]) == form)
+        if sses[i] <= FORM_REFINE_FACTOR * sses[best]:
+            starts.append(i)
+    return starts
+
+
+def _refined(effect: Effect, grid: Sequence[Any], sses: Sequence[float],
+             model: ComposedModel, build: Callable[[Any], ComposedModel],
+             ident: RunData) -> ComposedModel:
+    """Refine the last component of theta between its grid neighbours (the others fixed),
+    from each of :func:`_refine_starts`; the best fit of all, or ``model`` (the grid's)."""
+    best_sse = min(sses)
+    for i in _refine_starts(effect, grid, sses):
+        th = grid[i]
+        prefix = _prefix(th)
+        line = sorted(float(g[-1]) if isinstance(g, tuple) else float(g) for g in grid
+                      if _prefix(g) == prefix)
+        last = float(th[-1]) if isinstance(th, tuple) else float(th)
+        k = line.index(last)
+        lo, hi = line[max(k - 1, 0)], line[min(k + 1, len(line) - 1)]
+        if hi <= lo:
+            continue
+
+        def make(x: float, th: Any = th, prefix: tuple[Any, ...] = prefix) -> Any:
+            return (*prefix, float(x)) if isinstance(th, tuple) else float(x)
+
+        res = minimize_scalar(lambda x, make=make: _sse(build(make(x)), ident),
+                              bounds=(lo, hi), method="bounded",
+                              options={"maxiter": 8, "xatol": 1e-3 * (hi - lo)})
+        if float(res.fun) < best_sse:
+            model, best_sse = build(make(float(res.x))), float(res.fun)
     return model
 
 

@@ -387,18 +387,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
             break
         n_eff = float(sum(effective_n(r.y - current.held_pred[r.run_id])
                           for g in groups for r in g.heldout))
-        scores = []
-        it = tqdm(remaining, desc=f"round {round_}: candidates", disable=not st.progress)
-        for name in it:
-            try:
-                scores.append(score_candidate(CANDIDATES[name], base_factory, groups, terms,
-                                              current, n_eff, load_cells[name],
-                                              joint_retune=st.joint_retune))
-            except HysteresisError as err:
-                # The base cannot be refitted with this term (e.g. a density that no longer
-                # fits): the candidate is reported as not scorable, the others go on.
-                failed[name] = str(err)
-        scores.sort(key=lambda s: s["delta_bic"])
+        scores = _score_all(remaining, base_factory, groups, terms, current, n_eff, load_cells,
+                            st, round_, failed)
         rankings.append([_public(s) for s in scores])
         screens.append(_screen(groups, current, remaining))
         final_scores = {s["name"]: s for s in scores}
@@ -417,42 +407,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         if not added:
             break
         for k, chosen in enumerate(added):
-            eff = CANDIDATES[chosen["name"]]
-            evidence = {
-                "signature": eff.signature,
-                "term": eff.term,
-                "relative_gain": chosen["relative_gain"],
-                "delta_bic": chosen["delta_bic"],
-                "n_eff": chosen["n_eff"],
-                "n_params": chosen["n_params"],
-                "runs_improved": chosen["runs_improved"],
-                "residual_explained": chosen["residual_explained"],
-                "load_cell_evidence": chosen["load_cell_evidence"],
-                "heldout_per_run": chosen["heldout_per_run"],
-                "parameters": chosen["parameters"],
-                "runner_up": next((
-                    {"name": s["name"], "delta_bic": s["delta_bic"],
-                     "relative_gain": s["relative_gain"]}
-                    for s in scores if s["name"] != chosen["name"]), None),
-                "located_before": _signature_stats(loc),
-            }
-            if len(added) == 2:
-                evidence["added_jointly_with"] = added[1 - k]["name"]
-                evidence["pair"] = added[1]["pair"]
-            if model_error:
-                evidence["model_error_regression"] = _regress_model_error(
-                    model_error, groups, current, chosen["after"])
-            forms = _forms(chosen["name"], chosen["models"], groups)
-            evidence["form_per_configuration"] = forms
-            effects.append({
-                "name": chosen["name"],
-                "form": max(set(forms.values()), key=list(forms.values()).count),
-                "evidence": evidence,
-                "rmse_before": chosen["rmse_before"],
-                "rmse_after": chosen["rmse_after"],
-                "heldout_rmse_before": chosen["heldout_rmse_before"],
-                "heldout_rmse_after": chosen["heldout_rmse_after"],
-            })
+            effects.append(_effect_entry(chosen, added, k, scores, loc, groups, current,
+                                         model_error))
             for g in groups:
                 terms[g.key] = list(chosen["models"][g.key].terms)
             models = chosen["models"]
@@ -464,6 +420,43 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                                        current, base_name, [e["name"] for e in effects], st,
                                        final_scores)
                 if st.physical_evidence else [])
+    return _assemble(groups, evaluations, all_runs, base_name, effects, st, models, {
+        "located": located, "within_base_reach": within, "measured_within_reach": measured,
+        "within_base_reach_note": _reach_note(within, base_name),
+        "reach_remaining_fraction": reach,
+        "candidates_skipped": {n: "needs a channel the runs do not carry (tension)"
+                               for n in skipped},
+        "candidates_failed": failed, "rankings": rankings, "library_screen": screens})
+
+
+def _score_all(remaining: Sequence[str], base_factory: BaseFactory, groups: Sequence[Group],
+               terms: dict[str, list[Term]], current: Evaluation, n_eff: float,
+               load_cells: dict[str, dict[str, Any]], st: WorkflowSettings, round_: int,
+               failed: dict[str, str]) -> list[dict[str, Any]]:
+    """Every remaining candidate scored against the current model, best delta BIC first; a
+    candidate the base cannot be refitted with goes to ``failed`` with the reason."""
+    scores = []
+    it = tqdm(remaining, desc=f"round {round_}: candidates", disable=not st.progress)
+    for name in it:
+        try:
+            scores.append(score_candidate(CANDIDATES[name], base_factory, groups, terms,
+                                          current, n_eff, load_cells[name],
+                                          joint_retune=st.joint_retune))
+        except HysteresisError as err:
+            # The base cannot be refitted with this term (e.g. a density that no longer
+            # fits): the candidate is reported as not scorable, the others go on.
+            failed[name] = str(err)
+    scores.sort(key=lambda s: s["delta_bic"])
+    return scores
+
+
+def _assemble(groups: Sequence[Group], evaluations: list[Evaluation],
+              all_runs: Sequence[RunData], base_name: str, effects: list[dict[str, Any]],
+              st: WorkflowSettings, models: dict[str, ComposedModel], parts: dict[str, Any]
+              ) -> dict[str, Any]:
+    """The report: verdict, identifiability, residual and summary, with ``parts`` (located
+    rounds, reach, rankings, screens) in their places."""
+    current = evaluations[-1]
     e_id0, e_h0 = evaluations[0].errors(groups)
     e_id1, e_h1 = current.errors(groups)
     residual = _final_residual(groups, current)
@@ -476,16 +469,15 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         "identifiability": statement(effects[0], channels) if effects else None,
         "residual": residual,
         "effects": effects,
-        "located": located,
-        "within_base_reach": within,
-        "measured_within_reach": measured,
-        "within_base_reach_note": _reach_note(within, base_name),
-        "reach_remaining_fraction": reach,
-        "candidates_skipped": {n: "needs a channel the runs do not carry (tension)"
-                               for n in skipped},
-        "candidates_failed": failed,
-        "rankings": rankings,
-        "library_screen": screens,
+        "located": parts["located"],
+        "within_base_reach": parts["within_base_reach"],
+        "measured_within_reach": parts["measured_within_reach"],
+        "within_base_reach_note": parts["within_base_reach_note"],
+        "reach_remaining_fraction": parts["reach_remaining_fraction"],
+        "candidates_skipped": parts["candidates_skipped"],
+        "candidates_failed": parts["candidates_failed"],
+        "rankings": parts["rankings"],
+        "library_screen": parts["library_screen"],
         "summary": {
             "configurations": [g.key for g in groups],
             "identification_runs": [g.ident.run_id for g in groups],
@@ -499,6 +491,50 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     report["_evaluations"] = evaluations
     report["_groups"] = groups
     return report
+
+
+def _effect_entry(chosen: dict[str, Any], added: Sequence[dict[str, Any]], k: int,
+                  scores: Sequence[dict[str, Any]], loc: dict[str, Any], groups: Sequence[Group],
+                  current: Evaluation, model_error: dict[str, FloatArray] | None
+                  ) -> dict[str, Any]:
+    """The report's entry for an added effect (``chosen``, the ``k``-th of ``added`` this
+    round): its evidence, the form each configuration took and the errors before and after."""
+    eff = CANDIDATES[chosen["name"]]
+    evidence = {
+        "signature": eff.signature,
+        "term": eff.term,
+        "relative_gain": chosen["relative_gain"],
+        "delta_bic": chosen["delta_bic"],
+        "n_eff": chosen["n_eff"],
+        "n_params": chosen["n_params"],
+        "runs_improved": chosen["runs_improved"],
+        "residual_explained": chosen["residual_explained"],
+        "load_cell_evidence": chosen["load_cell_evidence"],
+        "heldout_per_run": chosen["heldout_per_run"],
+        "parameters": chosen["parameters"],
+        "runner_up": next((
+            {"name": s["name"], "delta_bic": s["delta_bic"],
+             "relative_gain": s["relative_gain"]}
+            for s in scores if s["name"] != chosen["name"]), None),
+        "located_before": _signature_stats(loc),
+    }
+    if len(added) == 2:
+        evidence["added_jointly_with"] = added[1 - k]["name"]
+        evidence["pair"] = added[1]["pair"]
+    if model_error:
+        evidence["model_error_regression"] = _regress_model_error(
+            model_error, groups, current, chosen["after"])
+    forms = _forms(chosen["name"], chosen["models"], groups)
+    evidence["form_per_configuration"] = forms
+    return {
+        "name": chosen["name"],
+        "form": max(set(forms.values()), key=list(forms.values()).count),
+        "evidence": evidence,
+        "rmse_before": chosen["rmse_before"],
+        "rmse_after": chosen["rmse_after"],
+        "heldout_rmse_before": chosen["heldout_rmse_before"],
+        "heldout_rmse_after": chosen["heldout_rmse_after"],
+    }
 
 
 def _screen(groups: Sequence[Group], current: Evaluation,
