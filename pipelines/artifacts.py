@@ -2,8 +2,10 @@
 
 A stage reads what another wrote through here, never by importing that stage: fitted
 model files (``tsm-fitted-model/1`` JSON, one per family, configuration and identification
-excitation, with the SHA-256 of the model they hold) and prediction files (parquet, the
-validation cache record in their metadata, a ``.sha256`` sidecar). Every write is atomic
+excitation, with the SHA-256 of the model they hold), prediction files (parquet, the
+validation cache record in their metadata, a ``.sha256`` sidecar), the metrics tables
+validate writes and the report reads (``metrics``, ``metrics_by_run``: parquet + csv) and the
+unseen-shape summary the report quotes. Every write is atomic
 (temporary name, then rename); every read checks the recorded hash and treats a mismatch as
 absent, so a damaged file is rewritten rather than trusted.
 """
@@ -127,3 +129,48 @@ def write_predictions(path: Path, preds: pd.DataFrame, record: Mapping[str, Any]
         pq.write_table(table, tmp, compression="zstd")
         digest = cache.sha256_file(tmp)
     cache.write_digest(path, digest)
+
+
+def read_predictions(path: Path) -> pd.DataFrame | None:
+    """A predictions file's rows, None when there is none."""
+    return pd.read_parquet(path) if path.exists() else None
+
+
+# -- metrics tables --------------------------------------------------------------------------
+
+#: The per-configuration metrics (columns ``stages.METRICS_COLUMNS``) and the per-run ones.
+METRICS = "metrics"
+METRICS_BY_RUN = "metrics_by_run"
+
+
+def write_table_pair(table: pd.DataFrame, stem: Path) -> None:
+    """``<stem>.parquet`` and ``<stem>.csv``, atomically, only when the content changed."""
+    parquet, csv = stem.with_suffix(".parquet"), stem.with_suffix(".csv")
+    new_hash = cache.hash_frame(table)
+    if parquet.exists() and csv.exists():
+        try:
+            if cache.hash_frame(pd.read_parquet(parquet)) == new_hash:
+                return
+        except (OSError, pa.ArrowException):
+            pass
+    with atomic_path(parquet) as tmp:
+        table.to_parquet(tmp, index=False)
+    with atomic_path(csv) as tmp:
+        table.to_csv(tmp, index=False)
+
+
+def read_metrics(reports: Path, name: str = METRICS) -> pd.DataFrame | None:
+    """A metrics table validate wrote under ``reports``; None when there is none."""
+    path = reports / f"{name}.parquet"
+    return pd.read_parquet(path) if path.exists() else None
+
+
+# -- the unseen-shape summary ------------------------------------------------------------------
+
+UNSEEN_SHAPE_SUMMARY = "unseen_shape_summary.csv"
+
+
+def read_unseen_shape_summary(reports: Path) -> pd.DataFrame:
+    """unseen_shape's per-family summary; empty when the stage did not run (or was skipped)."""
+    path = reports / UNSEEN_SHAPE_SUMMARY
+    return pd.read_csv(path) if path.exists() else pd.DataFrame()

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from hysteresis.play import play_matrix
-from pipelines import cache, schemas, stages
+from pipelines import artifacts, cache, schemas, stages
 from pipelines.artifacts import load_models, prediction_path, read_prediction_meta
 from pipelines.common import Paths, dataset_hash, dataset_units, hydra_sweep_dir
 from pipelines.skeleton import KeyFile
@@ -249,10 +249,8 @@ def _plot_configuration(pred_path: Path, out: Path, title: str, fit_excitation: 
                         units: tuple[str, str] = ("mm", "mm")) -> Path | None:
     from pipelines import plots
 
-    if not pred_path.exists():
-        return None
-    preds = pd.read_parquet(pred_path)
-    if preds.empty:
+    preds = artifacts.read_predictions(pred_path)
+    if preds is None or preds.empty:
         return None
     return plots.configuration_figure(preds, out, title=title, fit_excitation=fit_excitation,
                                       dpi=dpi, max_points=max_points, units=units)
@@ -316,9 +314,9 @@ def _inputs(s: schemas.ReportConfig, paths: Paths, metrics: pd.DataFrame | None,
     """The metrics (given, or validate's file), the fits of the report's excitation, the
     keys of the intact predictions, the units and the per-run scores."""
     if metrics is None:
-        if not paths.metrics_parquet.exists():
+        metrics = artifacts.read_metrics(paths.reports)
+        if metrics is None:
             raise PipelineError(f"{paths.metrics_parquet} does not exist; run `make validate`")
-        metrics = pd.read_parquet(paths.metrics_parquet)
     if metrics.empty:
         raise PipelineError("the metrics table is empty: nothing to report")
     configs = sorted({_config_of(r) for r in metrics.to_dict("records")},
@@ -333,8 +331,9 @@ def _inputs(s: schemas.ReportConfig, paths: Paths, metrics: pd.DataFrame | None,
     # file is left out of the figures instead of passing for the one validate wrote.
     pred_keys = {c.label: (read_prediction_meta(prediction_path(paths.predictions, c)) or {})
                  .get("key") for c in configs}
-    by_run_file = paths.reports / "metrics_by_run.parquet"
-    by_run = pd.read_parquet(by_run_file) if by_run_file.exists() else pd.DataFrame()
+    by_run = artifacts.read_metrics(paths.reports, artifacts.METRICS_BY_RUN)
+    if by_run is None:
+        by_run = pd.DataFrame()
     return _Inputs(paths, metrics, fits, configs, pred_keys, dataset_units(paths.processed),
                    by_run)
 
@@ -344,7 +343,7 @@ def _content_key(s: schemas.ReportConfig, inputs: _Inputs) -> str:
     from pipelines import plots
 
     # The unseen-shape stage's summary, shown when it was written (it runs before the report).
-    unseen_csv = inputs.paths.reports / "unseen_shape_summary.csv"
+    unseen_csv = inputs.paths.reports / artifacts.UNSEEN_SHAPE_SUMMARY
     keyed = {k: v for k, v in asdict(s).items()
              if k not in ("paths", "tracking", "n_jobs", "cache")}
     return cache.combine({
@@ -480,7 +479,9 @@ def _elementary_plot(fits: pd.DataFrame, config: Configuration, paths: Paths, fi
     if rows.empty or not cache.digest_matches(pred_path):
         return None
     model = stages.load_model(str(rows.iloc[0]["model_json"]))
-    preds = pd.read_parquet(pred_path)
+    preds = artifacts.read_predictions(pred_path)
+    if preds is None:
+        return None
     sub = preds[(preds["family"].astype(str) == "gamma")
                 & (preds["eval_excitation"].astype(str) == fit_exc)
                 & (preds["fit_excitation"].astype(str) == fit_exc)]
@@ -548,8 +549,7 @@ def _generalisation_section(doc: Doc, general: pd.DataFrame, *, metric: str, fit
 
 
 def _unseen_shape_section(doc: Doc, paths: Paths, *, unit: str) -> None:
-    unseen_csv = paths.reports / "unseen_shape_summary.csv"
-    unseen = pd.read_csv(unseen_csv) if unseen_csv.exists() else pd.DataFrame()
+    unseen = artifacts.read_unseen_shape_summary(paths.reports)
     if unseen.empty:
         return
     doc.h(2, "Shapes no model was fitted on (leave-one-configuration-out)")

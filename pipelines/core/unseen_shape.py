@@ -36,7 +36,7 @@ from hysteresis.shape_aware import (
     leave_one_out_models,
     refit_on_common_structure,
 )
-from pipelines import cache, schemas, stages
+from pipelines import artifacts, cache, schemas, stages
 from pipelines.common import (
     Paths,
     hydra_sweep_dir,
@@ -265,7 +265,7 @@ def run(settings: Any, *, dataset: pd.DataFrame | None = None,
     key = _content_key(s, models, runs)
     reports = paths.reports
     out_table = reports / "unseen_shape.parquet"
-    out_summary = reports / "unseen_shape_summary.csv"
+    out_summary = reports / artifacts.UNSEEN_SHAPE_SUMMARY
     plot = reports / "plots" / "unseen_shape.png"
     keyfile = KeyFile(reports / KEY_FILE, enabled=s.cache, needs=(out_table,))
     if keyfile.hit(key) is not None:

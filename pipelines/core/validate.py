@@ -18,9 +18,8 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-import pyarrow as pa
 
-from pipelines import cache, schemas, stages
+from pipelines import artifacts, schemas, stages
 from pipelines.artifacts import (
     load_models,
     prediction_path,
@@ -35,7 +34,7 @@ from pipelines.common import (
     stage_columns,
 )
 from pipelines.stages import Configuration, RunSignal
-from rig_io.atomic import atomic_path, clean_leftovers, write_text_atomic
+from rig_io.atomic import clean_leftovers, write_text_atomic
 
 log = logging.getLogger("pipelines.validate")  # the stage's name, as its command logs
 
@@ -164,7 +163,7 @@ def _write_outputs(done: Sequence[_Done], paths: Paths, heldout: Sequence[str]
     by_run = [r for _, r, _ in done]
     runs_table = stages.run_metrics_frame(
         pd.concat(by_run, ignore_index=True).to_dict("records") if by_run else [])
-    write_table(runs_table, paths.reports / "metrics_by_run")
+    artifacts.write_table_pair(runs_table, paths.reports / artifacts.METRICS_BY_RUN)
     _warn_if_nothing_held_out(metrics, heldout)
     errors = [e for _, _, errs in done for e in errs]
     write_text_atomic(paths.reports / "validate_errors.json", json.dumps(errors, indent=1))
@@ -213,21 +212,4 @@ def _run_tasks(todo: Sequence[tuple[pd.DataFrame, dict[str, list[RunSignal]], st
 
 def write_metrics(metrics: pd.DataFrame, paths: Paths) -> None:
     """``metrics.parquet`` and ``metrics.csv``, atomically, only when the content changed."""
-    write_table(metrics, paths.metrics_parquet.with_suffix(""))
-
-
-def write_table(table: pd.DataFrame, stem: Path) -> None:
-    """``<stem>.parquet`` and ``<stem>.csv``, atomically, only when the content changed."""
-
-    parquet, csv = stem.with_suffix(".parquet"), stem.with_suffix(".csv")
-    new_hash = cache.hash_frame(table)
-    if parquet.exists() and csv.exists():
-        try:
-            if cache.hash_frame(pd.read_parquet(parquet)) == new_hash:
-                return
-        except (OSError, pa.ArrowException):
-            pass
-    with atomic_path(parquet) as tmp:
-        table.to_parquet(tmp, index=False)
-    with atomic_path(csv) as tmp:
-        table.to_csv(tmp, index=False)
+    artifacts.write_table_pair(metrics, paths.reports / artifacts.METRICS)
