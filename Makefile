@@ -19,11 +19,12 @@ REPORT ?= data/reports/discrepancy.json
 .PHONY: help venv data generate ingest fit validate report pipeline test test-fast bench crash-test ui \
         compensate discrepancy discrepancy-study foreign-example lint typecheck clean clean-data \
         venv-team chromium postgresql cluster-check ui-check team-test bench-cluster \
-        docs-figures lineage-check report-check
+        docs-figures lineage-check report-check cli-check
 
 help:
 	@echo "make pipeline    generate -> ingest -> fit -> validate -> report (virtual rig, local MLflow)"
 	@echo "make test        run the test suite"
+	@echo "make cli-check   the clean-room command-line contract of every stage (CI runs it)"
 	@echo "make data        write the 120-run standard virtual campaign under data/raw/virtual/"
 	@echo "make ingest      raw runs -> data/processed/ (validated parquet)"
 	@echo "make bench       benchmarks -> bench/results.json"
@@ -67,12 +68,21 @@ report: $(STAMP)
 pipeline: $(STAMP)
 	$(PY) -m pipelines.run_all $(ARGS)
 
+# The clean-room command-line contract (48 command launches, about 95 s of CPU) runs in
+# `make cli-check` and in CI's team-test, so `make test` stays under 5 minutes on 2 cores;
+# tests/pipelines/test_cli*.py check the same guard in-process here.
+CLI_CONTRACT := tests/cleanroom/test_cli_contract.py
+
 test: $(STAMP)
-	$(PY) -m pytest -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/team
+	$(PY) -m pytest -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/team \
+	  --ignore=$(CLI_CONTRACT)
+
+cli-check: $(STAMP)
+	$(PY) -m pytest -q -n 2 -p no:cacheprovider $(CLI_CONTRACT)
 
 # the inner loop: everything but the tests marked slow (simulated campaigns, subprocess kills)
 test-fast: $(STAMP)
-	$(PY) -m pytest -n 2 -m 'not slow' --ignore=tests/team
+	$(PY) -m pytest -n 2 -m 'not slow' --ignore=tests/team --ignore=$(CLI_CONTRACT)
 
 bench: $(STAMP)
 	$(PY) -m bench.run --out bench/results.json
@@ -158,10 +168,11 @@ report-check: $(TEAM_STAMP) chromium
 
 # The tests that need the team extras: the UI check above and tracking=server against a
 # throwaway PostgreSQL + MLflow server (tests/team/test_tracking_server.py). CI runs it.
-team-test: $(TEAM_STAMP) chromium postgresql
+team-test: $(STAMP) $(TEAM_STAMP) chromium postgresql
 	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
 	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/team/test_ui_browser.py \
 	  tests/team/test_tracking_server.py
+	$(PY) -m pytest -q -n 2 -p no:cacheprovider $(CLI_CONTRACT)
 
 # Throwaway PostgreSQL + MLflow server + Ray head on 127.0.0.1, a 24-job fit sweep through
 # hydra's Ray launcher, runs counted in the server: prints `lost N`, exits 0 only for lost 0.
