@@ -69,7 +69,8 @@ pipeline: $(STAMP)
 	$(PY) -m pipelines.run_all $(ARGS)
 
 # The clean-room command-line contract (48 command launches, about 95 s of CPU) runs in
-# `make cli-check` and in CI's team-test, so `make test` stays under 5 minutes on 2 cores;
+# `make cli-check` and in CI's team-test (one process: the module runs its launches in a
+# pool), so `make test` stays under 5 minutes on 2 cores;
 # tests/pipelines/test_cli*.py check the same guard in-process here.
 CLI_CONTRACT := tests/cleanroom/test_cli_contract.py
 
@@ -78,7 +79,7 @@ test: $(STAMP)
 	  --ignore=$(CLI_CONTRACT)
 
 cli-check: $(STAMP)
-	$(PY) -m pytest -q -n 2 -p no:cacheprovider $(CLI_CONTRACT)
+	$(PY) -m pytest -q -n 0 -p no:cacheprovider $(CLI_CONTRACT)
 
 # the inner loop: everything but the tests marked slow (simulated campaigns, subprocess kills)
 test-fast: $(STAMP)
@@ -172,7 +173,7 @@ team-test: $(STAMP) $(TEAM_STAMP) chromium postgresql
 	TSM_CHROMIUM="$$(command -v chromium || command -v chromium-browser)" \
 	  $(TEAM_PY) -m pytest -q -n 0 -p no:cacheprovider tests/team/test_ui_browser.py \
 	  tests/team/test_tracking_server.py
-	$(PY) -m pytest -q -n 2 -p no:cacheprovider $(CLI_CONTRACT)
+	$(PY) -m pytest -q -n 0 -p no:cacheprovider $(CLI_CONTRACT)
 
 # Throwaway PostgreSQL + MLflow server + Ray head on 127.0.0.1, a 24-job fit sweep through
 # hydra's Ray launcher, runs counted in the server: prints `lost N`, exits 0 only for lost 0.
