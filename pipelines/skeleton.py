@@ -129,10 +129,16 @@ class Stage(Generic[S, R]):
     def config_name(self) -> str:
         return self.config or self.name
 
+    def settings(self, cfg: Any) -> S:
+        """The typed settings of ``cfg`` (a settings object comes back as it is)."""
+        if isinstance(cfg, self.schema):
+            return cfg
+        return self.convert(cfg) if self.convert else schemas.settings(self.schema, cfg)
+
     def execute(self, cfg: Any) -> R:
         """Settings once, tracker once, core, then tracking (``cfg``: composed or plain)."""
         started = time.time()
-        settings = self.convert(cfg) if self.convert else schemas.settings(self.schema, cfg)
+        settings = self.settings(cfg)
         tracker = tracker_for(settings) if self.track is not None else None
         if tracker is not None and tracker.enabled:
             tracker.init_store()  # a locked or damaged store stops the stage before the work
@@ -154,10 +160,13 @@ class Stage(Generic[S, R]):
         guard(self.config_name)
 
         def entry(cfg: Any) -> None:
-            result = run_stage(self.name, lambda: self.execute(cfg), self.errors)
+            def once() -> tuple[S, R]:  # converted once, inside run_stage's one-line errors
+                settings = self.settings(cfg)
+                return settings, self.execute(settings)
+
+            settings, result = run_stage(self.name, once, self.errors)
             if self.announce is not None:
-                print(self.announce(self.convert(cfg) if self.convert
-                                    else schemas.settings(self.schema, cfg), result))
+                print(self.announce(settings, result))
 
         # Hydra names the job (its log file, a sweep's parent run) after the task
         # function's module: the command's (``pipelines.fit`` -> ``fit``), not this one
