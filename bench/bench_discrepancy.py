@@ -14,6 +14,7 @@ locate -> name -> add loop, and the ratio against the reference joint refit by b
 from __future__ import annotations
 
 import json
+import sys
 import time
 from typing import Any
 from unittest import mock
@@ -70,19 +71,49 @@ STRENGTHS = (1.0, 2.0)
 
 
 def injector_cases(strengths: tuple[float, ...] = STRENGTHS
-                   ) -> dict[str, tuple[dict[str, float], str]]:
-    """Case name -> (injected effects, start): clean at rest (two noise seeds: ``#1`` names
-    the seed) and loaded, every effect form at each of ``strengths``."""
+                   ) -> dict[str, tuple[dict[str, float], str, str | None]]:
+    """Case name -> (injected effects, start, ragged load cell): clean at rest (two noise
+    seeds: ``#1`` names the seed), loaded, and loaded with ragged load-cell streams; every
+    effect form at each of ``strengths``, every third (by form) starting loaded and every
+    fourth with ragged load-cell streams (``mixed``: a run whose stream ends early, one with
+    a gap; :func:`hysteresis.discrepancy.inject.ragged_tension`)."""
     from hysteresis.discrepancy.inject import FORMS
 
-    cases: dict[str, tuple[dict[str, float], str]] = {
-        "clean": ({}, "rest"), "clean#1": ({}, "rest"), "clean-loaded": ({}, "loaded")}
+    cases: dict[str, tuple[dict[str, float], str, str | None]] = {
+        "clean": ({}, "rest", None), "clean#1": ({}, "rest", None),
+        "clean-loaded": ({}, "loaded", None), "clean-loaded-ragged": ({}, "loaded", "mixed")}
     for s in strengths:
-        cases.update({f"{key}@{s:g}": ({key: s}, "rest") for key in FORMS})
+        for i, key in enumerate(FORMS, start=1):
+            start = "loaded" if i % 3 == 0 else "rest"
+            ragged = "mixed" if i % 4 == 0 else None
+            cases[f"{key}@{s:g}"] = ({key: s}, start, ragged)
     return cases
 
 
-def first_form_cases() -> dict[str, tuple[dict[str, float], str]]:
+def injector_runs(plant: str, effects: dict[str, float], start: str, ragged: str | None,
+                  seed: int = 0) -> list[Any]:
+    """One injector source's runs as the stage sees them: a ragged load-cell stream is filled
+    or dropped by the stage's own rule (:func:`pipelines.discrepancy.channel_values`)."""
+    from dataclasses import replace
+
+    import numpy as np
+    import pandas as pd
+
+    from hysteresis.discrepancy.inject import injected_runs, ragged_tension
+    from pipelines.discrepancy import channel_values
+
+    runs = injected_runs(plant, effects, start=start, seed=seed)
+    if ragged is None:
+        return runs
+    out = []
+    for i, run in enumerate(runs):
+        raw = ragged_tension(np.asarray(run.tension), ragged, i)
+        tension, _ = channel_values(pd.Series(raw), run.t)
+        out.append(replace(run, tension=tension))
+    return out
+
+
+def first_form_cases() -> dict[str, tuple[dict[str, float], str, str | None]]:
     """The clean cases and every effect's first form at strength 1 (what ``make bench``
     measures; the forms' matrix takes hours on 2 shared cores)."""
     from hysteresis.discrepancy.inject import INJECTED
@@ -91,7 +122,7 @@ def first_form_cases() -> dict[str, tuple[dict[str, float], str]]:
             if k.startswith("clean") or k.split("@")[0] in INJECTED}
 
 
-def injector_sources(cases: dict[str, tuple[dict[str, float], str]] | None = None,
+def injector_sources(cases: dict[str, tuple[dict[str, float], str, str | None]] | None = None,
                      plants: tuple[str, ...] | None = None) -> dict[str, Any]:
     """What ``make discrepancy`` does (:func:`pipelines.discrepancy.analyse`: automatic base,
     the workflow, a second base when the first leaves a residual) on three 80 s runs from the
@@ -105,16 +136,16 @@ def injector_sources(cases: dict[str, tuple[dict[str, float], str]] | None = Non
     ``python -m bench.bench_discrepancy --injector`` runs it alone; ``run()`` includes it."""
     from hydra import compose, initialize_config_dir
 
-    from hysteresis.discrepancy.inject import PLANTS, effect_and_form, identifiable, injected_runs
+    from hysteresis.discrepancy.inject import PLANTS, effect_and_form, identifiable
     from pipelines.common import CONF_DIR, to_container
     from pipelines.discrepancy import analyse
 
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = to_container(compose("discrepancy"))
     out: dict[str, Any] = {}
-    for case, (effects, start) in (cases or injector_cases()).items():
+    for case, (effects, start, ragged) in (cases or injector_cases()).items():
         for plant in plants or PLANTS:
-            runs = injected_runs(plant, effects, start=start,
+            runs = injector_runs(plant, effects, start, ragged,
                                  seed=int(case.split("#")[1]) if "#" in case else 0)
             t0, c0 = time.perf_counter(), time.process_time()
             rep, _ = analyse(runs, auto_families=dict(cfg["auto_families"]),
@@ -125,6 +156,7 @@ def injector_sources(cases: dict[str, tuple[dict[str, float], str]] | None = Non
             hidden = effect_and_form(key) if key else None
             ident = bool(key is None or identifiable(key, plant))
             out[f"{plant}:{case}"] = {
+                "start": start, "ragged": ragged,
                 "seconds": round(time.perf_counter() - t0, 2), "cpu_seconds": round(cpu, 2),
                 "base": rep["base_family"],
                 "bases_tried": [t["base"] for t in rep["bases_tried"] or []],
@@ -136,6 +168,9 @@ def injector_sources(cases: dict[str, tuple[dict[str, float], str]] | None = Non
                     rep["summary"]["heldout_reduction_vs_best_plain"]), 3),
                 "rmse_over_noise": round(float(rep["residual"]["rmse_over_noise"]), 2),
                 **score_answer(rep, hidden, ident)}
+            # one line a source as it finishes (the matrix takes hours on 2 shared cores)
+            print(json.dumps({f"{plant}:{case}": out[f"{plant}:{case}"]}), file=sys.stderr,
+                  flush=True)
     out["_summary"] = summarise(out)
     return out
 
@@ -197,7 +232,6 @@ def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None 
 
     ``python -m bench.bench_discrepancy --cleanroom [--strong-only]`` runs it."""
     import os
-    import sys
     import tempfile
     from pathlib import Path
 
@@ -295,7 +329,7 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
 BASES = ("gamma", "gamma_free", "preisach", "bouc_wen", "coleman_hodgdon")
 
 
-def base_independence(cases: dict[str, tuple[dict[str, float], str]] | None = None
+def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]] | None = None
                       ) -> dict[str, Any]:
     """Per injector source, the first effect named (or none) with each of :data:`BASES` given
     explicitly and with ``auto``; the summary counts the sources on which every base agrees
@@ -311,7 +345,7 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str]] | None = No
     ``python -m bench.bench_discrepancy --bases`` runs it alone (about 25 min on 2 cores)."""
     from hydra import compose, initialize_config_dir
 
-    from hysteresis.discrepancy.inject import PLANTS, injected_runs
+    from hysteresis.discrepancy.inject import PLANTS
     from pipelines.common import CONF_DIR, to_container
     from pipelines.discrepancy import (
         analyse,
@@ -330,9 +364,9 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str]] | None = No
         cases = {k: v for k, v in injector_cases().items()
                  if k in ("clean", "clean-loaded") or k.endswith("@1")}
     out: dict[str, Any] = {}
-    for case, (effects, start) in cases.items():
+    for case, (effects, start, ragged) in cases.items():
         for plant in PLANTS:
-            runs = injected_runs(plant, effects, start=start,
+            runs = injector_runs(plant, effects, start, ragged,
                                  seed=int(case.split("#")[1]) if "#" in case else 0)
             row: dict[str, Any] = {}
             for base in ("auto", *BASES):
@@ -427,12 +461,25 @@ if __name__ == "__main__":
     parser.add_argument("--strong-only", action="store_true",
                         help="with --cleanroom: the strong strength only")
     parser.add_argument("--plants", default="",
-                        help="with --cleanroom: comma-separated plants (default: all four)")
+                        help="with --cleanroom or --injector: comma-separated plants (default: "
+                             "all four)")
+    parser.add_argument("--strengths", default="",
+                        help="with --injector: comma-separated strengths (default: 1,2)")
+    parser.add_argument("--forms", default="",
+                        help="with --injector: comma-separated effect forms (default: all; "
+                             "the clean sources are always run)")
     parser.add_argument("--with-bases", action="store_true",
                         help="with --cleanroom: also each auto family given as the base")
     args = parser.parse_args()
     if args.injector:
-        print(json.dumps(injector_sources(), indent=1))
+        chosen = injector_cases(tuple(float(x) for x in args.strengths.split(",") if x)
+                                or STRENGTHS)
+        if args.forms:
+            keep = set(args.forms.split(","))
+            chosen = {k: v for k, v in chosen.items()
+                      if k.startswith("clean") or k.split("@")[0] in keep}
+        print(json.dumps(injector_sources(
+            chosen, tuple(p for p in args.plants.split(",") if p) or None), indent=1))
     elif args.bases:
         print(json.dumps(base_independence(), indent=1))
     elif args.cleanroom:

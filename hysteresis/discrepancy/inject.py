@@ -25,6 +25,9 @@ injected, coded here from its physical description and not from the candidate's 
 * ``saturation``: a soft (tanh) stop near the top; ``:hard``: a hard stop; ``:cubic``: cubic
   softening.
 
+A source may start loaded (``start``) and its load-cell stream may be ragged (ending a few
+samples early, or with a short gap: :func:`ragged_tension`).
+
 Each run carries an input tension (the tendon's end, after any backlash: a linear spring
 preload plus a friction step that follows the direction of motion) and white noise of known
 size on the output. :data:`NOT_IDENTIFIABLE` and :func:`identifiable` are the ground truth of
@@ -331,6 +334,31 @@ def _reading(y: FloatArray, uf: FloatArray, tf: FloatArray, tension: FloatArray,
     y = y - size("tendon_elongation:square_output") * (t_out**2 - t_out[m] ** 2) \
         / TENSION_TOP_N**2
     return np.asarray(y, dtype=np.float64)
+
+
+#: Ragged load-cell streams: ``end``, the stream stops a few samples before the encoders
+#: (2-5, by run); ``gap``, a dropout of 3-8 samples mid-run; ``mixed``, the second run ends
+#: early and the third has a gap (as a lab's logger leaves them).
+RAGGED = ("end", "gap", "mixed")
+
+
+def ragged_tension(tension: FloatArray, ragged: str | None, run_index: int) -> FloatArray:
+    """The load-cell stream as a logger leaves it, missing samples NaN (see :data:`RAGGED`;
+    ``run_index``: the run's place in its source). What is done with them (filled within a
+    limit, or the channel dropped) is the stage's rule, not the injector's: a
+    :class:`~.runs.RunData` holds complete channels only."""
+    if ragged is None:
+        return tension
+    if ragged not in RAGGED:
+        raise HysteresisError(f"ragged must be one of {', '.join(RAGGED)}, got {ragged!r}")
+    kind = ragged if ragged != "mixed" else (None, "end", "gap")[run_index % 3]
+    out = np.asarray(tension, dtype=np.float64).copy()
+    if kind == "end":
+        out[out.size - (2 + run_index % 4):] = np.nan
+    elif kind == "gap":
+        mid = out.size // 2
+        out[mid:mid + 3 + run_index % 6] = np.nan
+    return out
 
 
 def inject(family: str, effects: Mapping[str, float], kind: str, *, seed: int = 0,

@@ -36,3 +36,17 @@ def test_injected_asymmetry_is_a_dead_zone_plus_an_offset(plant: str, strength: 
     assert symmetric.tension is not None
     np.testing.assert_array_equal(one_way.tension, clean.tension)
     assert np.sqrt(np.mean((symmetric.tension - clean.tension) ** 2)) > 0.05
+
+
+def test_ragged_load_cell_streams_end_early_or_drop_out() -> None:
+    from hysteresis.discrepancy.inject import ragged_tension
+
+    run = inject("gamma", {}, "sine_decay")
+    assert run.tension is not None
+    end = ragged_tension(run.tension, "end", 1)
+    assert np.isnan(end[-3:]).all() and np.isfinite(end[:-3]).all()
+    gap = ragged_tension(run.tension, "gap", 2)
+    assert 3 <= int(np.isnan(gap).sum()) <= 8 and np.isfinite(gap[[0, -1]]).all()
+    assert not np.isnan(ragged_tension(run.tension, "mixed", 0)).any()
+    with pytest.raises(Exception, match="ragged"):
+        ragged_tension(run.tension, "frayed", 0)
