@@ -1,0 +1,40 @@
+"""Forms added to the candidate library, each recovered from a known signal on small data."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from hysteresis.discrepancy.effects import CANDIDATES, ComposedModel, Term, fit_with_effect
+from hysteresis.discrepancy.inject import injected_runs
+from hysteresis.discrepancy.workflow import base_factory_for
+
+
+def _ident() -> tuple:
+    # the first 30 s of the identification sine (its 6 mm and 4.5 mm blocks): enough stroke
+    full = injected_runs("gamma", kinds=("sine_decay",))[0]
+    run = full.segment(0, 750, role=full.role, suffix="head")
+    base = ComposedModel(base_factory_for("gamma", constraint="free", fit_offset=True)).fit(run)
+    return run, base.predict(run)
+
+
+def test_a_tanh_stop_over_the_whole_stroke_is_told_from_a_cubic_softening() -> None:
+    run, y0 = _ident()
+    sat = CANDIDATES["saturation"]
+    ctx = sat.context(replace(run, y=y0))
+    c, half = ctx["centre"], ctx["half"]
+    big_y = 1.2 * half  # 13 % short at the top of the stroke
+    factory = base_factory_for("gamma", constraint="free", fit_offset=True)
+    for hidden, form in (("tanh", "soft"), ("cubic", "cubic")):
+        x = y0 - c
+        y = c + (big_y * np.tanh(x / big_y) if hidden == "tanh" else x - 0.13 * x**3 / half**2)
+        m = fit_with_effect(factory, [], sat, replace(run, y=y))
+        term = m.terms[-1]
+        assert term.form == form
+        if hidden == "tanh":
+            # Y is a multiple of the recorded (stopped) half-range
+            got = float(term.theta[-1]) * term.context["half"]
+            assert got == pytest.approx(big_y, rel=0.02)
+        assert np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2)) < 0.02 * half
