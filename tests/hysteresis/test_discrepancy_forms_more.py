@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from hysteresis.discrepancy.effects import CANDIDATES, ComposedModel, Term, fit_with_effect
+from hysteresis.discrepancy.effects import CANDIDATES, ComposedModel, fit_with_effect
 from hysteresis.discrepancy.inject import injected_runs
 from hysteresis.discrepancy.workflow import base_factory_for
 
