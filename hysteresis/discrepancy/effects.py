@@ -416,7 +416,9 @@ class Asymmetry(Effect):
     term = ("one-way backlash: c * m(t), m = 0 before the first motion, 1 after (a loop-centre "
             "shift born at once); loading_gain: c1 (y_base - centre) s(t) + c2 s(t), the "
             "branches steeper one way (s = +-1, the direction of motion); pull_push_gain: "
-            "c (y_base - centre) on the pull side of the centre only")
+            "c (y_base - kink) on the pull side of a kink only, the kink at centre + k half "
+            "(k on a grid, refined: the plant's rest, off the recorded range's centre when one "
+            "side's gain differs)")
     n_linear = 1
     before_stop = True
     first_form = "one_way_backlash"
@@ -427,10 +429,14 @@ class Asymmetry(Effect):
         return [NO_THETA, *self.form_grid(ident)]
 
     def form_grid(self, ident: RunData) -> list[Any]:
-        return [("loading_gain", 0.0), ("pull_push_gain", 0.0)]
+        # the pull/push kink sits at the plant's rest, which a side's gain moves off the
+        # recorded range's centre (a push side at 0.75 moves it by 0.14 of the half-range)
+        return [("loading_gain", 0.0),
+                *[("pull_push_gain", k) for k in (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)]]
 
     def context(self, ident: RunData) -> Ctx:
-        return {"centre": 0.5 * float(ident.y.max() + ident.y.min())}
+        return {"centre": 0.5 * float(ident.y.max() + ident.y.min()),
+                "half": 0.5 * float(np.ptp(ident.y))}
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
         form = self.form(theta)
@@ -439,8 +445,8 @@ class Asymmetry(Effect):
             # branches of a backlash whose two sides differ in slope
             return np.column_stack([(y_base - ctx["centre"]) * run.s, run.s])
         if form == "pull_push_gain":
-            return np.asarray(np.maximum(y_base - ctx["centre"], 0.0)[:, None],
-                              dtype=np.float64)
+            kink = ctx["centre"] + float(theta[-1]) * ctx.get("half", 0.0)
+            return np.asarray(np.maximum(y_base - kink, 0.0)[:, None], dtype=np.float64)
         return np.abs(run.s)[:, None]
 
 

@@ -38,3 +38,19 @@ def test_a_tanh_stop_over_the_whole_stroke_is_told_from_a_cubic_softening() -> N
             got = float(term.theta[-1]) * term.context["half"]
             assert got == pytest.approx(big_y, rel=0.02)
         assert np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2)) < 0.02 * half
+
+
+def test_a_push_side_gain_is_fitted_at_the_plant_rest() -> None:
+    # the push side at 0.75: the recorded range's centre moves off the rest by 0.14 of the
+    # half-range, and a kink held at the centre left a third of the effect
+    run, y0 = _ident()
+    rest = 0.5 * float(y0.max() + y0.min())
+    x = y0 - rest
+    y = rest + np.where(x > 0.0, x, 0.75 * x)
+    factory = base_factory_for("gamma", constraint="free", fit_offset=True)
+    m = fit_with_effect(factory, [], CANDIDATES["asymmetry"], replace(run, y=y))
+    term = m.terms[-1]
+    assert term.form == "pull_push_gain"
+    kink = term.context["centre"] + float(term.theta[-1]) * term.context["half"]
+    assert kink == pytest.approx(rest, abs=0.07 * term.context["half"])
+    assert np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2)) < 0.01 * np.ptp(y)
