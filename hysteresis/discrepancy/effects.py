@@ -68,9 +68,14 @@ class Effect:
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {}
     #: The name a form is reported under, where it differs from its tag.
     labels: ClassVar[dict[str, str]] = {}
-    #: Does the effect's load-cell claim (:mod:`.evidence`) hold for every form, or only for
-    #: the first (a backlash at the reversals, not a static band about the rest)?
-    claim_all_forms: bool = False
+    #: The forms besides the first for which the effect's load-cell claim (:mod:`.evidence`)
+    #: holds: a backlash claims a dead travel at the reversals, a static band about the rest
+    #: does not.
+    claim_forms: ClassVar[tuple[str, ...]] = ()
+
+    def claims(self, forms: set[str]) -> bool:
+        """Does the load-cell claim hold for a fit whose configurations took ``forms``?"""
+        return forms <= {self.first_form, *self.claim_forms}
 
     def form(self, theta: Any) -> str:
         """The physical form ``theta`` stands for."""
@@ -171,8 +176,10 @@ class RateDependence(Effect):
     has_theta = True
     n_theta = 2
     first_form = "speed_friction"
-    #: any speed law of the sheath's friction raises the friction the two load cells read
-    claim_all_forms = True
+    #: a speed law of the sheath's friction (Stribeck-like, viscous, |v|^a damping) raises
+    #: the friction the two load cells read; a first-order relaxation of the output (a
+    #: viscoelastic lag in the transmission) need not change the tension ratio at all
+    claim_forms = ("viscous", "power")
     #: viscous: c v; power: c sign(v) |v / v_top|^a (nonlinear damping); relaxation: c times
     #: the speed through a first-order lag of time constant T (a Maxwell element's force).
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {

@@ -203,8 +203,7 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
     evidence = load_cells if load_cells is not None else corroboration(
         effect.name, [g.ident for g in groups])
     forms = {models[g.key].terms[-1].form for g in groups}
-    if (evidence.get("claim") is not None and forms != {effect.first_form}
-            and not effect.claim_all_forms):
+    if evidence.get("claim") is not None and not effect.claims(forms):
         # a backlash claims a dead travel at the reversals, a direction-dependent friction a
         # pull/release ratio; a static dead band or a direction-dependent gain claims nothing
         # the load cells read

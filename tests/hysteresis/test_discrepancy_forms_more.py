@@ -54,3 +54,13 @@ def test_a_push_side_gain_is_fitted_at_the_plant_rest() -> None:
     kink = term.context["centre"] + float(term.theta[-1]) * term.context["half"]
     assert kink == pytest.approx(rest, abs=0.07 * term.context["half"])
     assert np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2)) < 0.01 * np.ptp(y)
+
+
+def test_a_relaxation_of_the_output_claims_no_friction_reading() -> None:
+    # a speed law of the sheath's friction raises the tension ratio the two load cells read;
+    # a first-order lag of the output need not, so a flat friction reading cannot reject it
+    rate = CANDIDATES["rate_dependence"]
+    assert rate.claims({"speed_friction", "viscous"}) and rate.claims({"power"})
+    assert not rate.claims({"relaxation"}) and not rate.claims({"viscous", "relaxation"})
+    assert not CANDIDATES["dead_zone"].claims({"dead_band"})
+    assert CANDIDATES["dead_zone"].claims({"backlash"})

@@ -135,14 +135,18 @@ def test_without_physical_evidence_weak_friction_asymmetry_is_misnamed():
 
 def test_dead_zone_is_within_reach_of_play_operators_with_an_offset():
     # Against Gamma with a free sum and an offset (play operators compose into wider ones),
-    # the dead zone is not missing: no effect is added and the base's held-out error stays
-    # near its clean level.
+    # the dead zone is not missing: it is not named and the base's held-out error stays near
+    # its clean level. What may be named is the rig's own tendon stretch: with the dead
+    # zone's tension swings its term removes 27 % of the held-out error (20 % when the
+    # decimation averaged the input's reversals), and the model with it predicts below the
+    # clean base's level.
     clean = report({}, "gamma", constraint="free", fit_offset=True)
     dz = report({"dead_zone": 2.0}, "gamma", constraint="free", fit_offset=True)
     assert "dead_zone" in clean["within_base_reach"]
     assert "dead_zone" in clean["within_base_reach_note"]
-    assert dz["verdict"] == "no_missing_effect"
+    assert {e["name"] for e in dz["effects"]} <= {"tendon_elongation"}
     assert dz["summary"]["heldout_rmse_before"] < 1.4 * clean["summary"]["heldout_rmse_before"]
+    assert dz["summary"]["heldout_rmse_after"] < clean["summary"]["heldout_rmse_before"]
 
 
 def test_interacting_effects_are_found_as_a_pair():
