@@ -182,9 +182,13 @@ class RateDependence(Effect):
     claim_forms = ("viscous", "power")
     #: viscous: c v; power: c sign(v) |v / v_top|^a (nonlinear damping); relaxation: c times
     #: the speed through a first-order lag of time constant T (a Maxwell element's force).
+    #: lag (reported as relaxation): the follower's motion itself relaxes, c (LP_T(M) - M)
+    #: with M the model's motion (c = 1: a first-order lag of time constant T of the output,
+    #: a viscoelastic transmission), which holds still where the plays hold the output.
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
         "viscous": ("output", 1, False), "power": ("output", 1, False),
-        "relaxation": ("output", 1, False)}
+        "relaxation": ("output", 1, False), "lag": ("output", 1, True)}
+    labels: ClassVar[dict[str, str]] = {"lag": "relaxation"}
 
     def grid(self, ident: RunData) -> list[Any]:
         vmax = float(np.percentile(np.abs(ident.v), 99))
@@ -194,7 +198,8 @@ class RateDependence(Effect):
 
     def form_grid(self, ident: RunData) -> list[Any]:
         return [("viscous", 0.0), ("power", 0.5), ("power", 2.0), ("relaxation", 0.3),
-                ("relaxation", 1.0), ("relaxation", 3.0)]
+                ("relaxation", 1.0), ("relaxation", 3.0), ("lag", 0.1), ("lag", 0.3),
+                ("lag", 1.0)]
 
     def operator_grid(self, ident: RunData) -> list[Any]:
         """(1, v0, g) for the speed-scaled play operators (the leading 1 tags the form; g, the
@@ -208,6 +213,8 @@ class RateDependence(Effect):
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
         form, p = theta[0], float(theta[-1])
+        if form == "lag":
+            return np.asarray((lowpass(y_base, p, run.dt) - y_base)[:, None], dtype=np.float64)
         v = run.v / ctx["v_top"]
         if form == "viscous":
             x = v

@@ -64,3 +64,16 @@ def test_a_relaxation_of_the_output_claims_no_friction_reading() -> None:
     assert not rate.claims({"relaxation"}) and not rate.claims({"viscous", "relaxation"})
     assert not CANDIDATES["dead_zone"].claims({"dead_band"})
     assert CANDIDATES["dead_zone"].claims({"backlash"})
+
+
+def test_a_first_order_lag_of_the_output_is_recovered_as_a_relaxation() -> None:
+    from hysteresis.discrepancy.effects import lowpass
+
+    run, y0 = _ident()
+    y = lowpass(y0, 0.4, run.dt)  # the follower's motion relaxes with 0.4 s
+    factory = base_factory_for("gamma", constraint="free", fit_offset=True)
+    m = fit_with_effect(factory, [], CANDIDATES["rate_dependence"], replace(run, y=y))
+    term = m.terms[-1]
+    assert term.form == "relaxation" and term.theta[0] == "lag"
+    assert float(term.theta[-1]) == pytest.approx(0.4, rel=0.05)
+    assert np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2)) < 0.005 * np.ptp(y)
