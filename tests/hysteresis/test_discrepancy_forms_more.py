@@ -103,3 +103,13 @@ def test_a_loading_gain_whose_direction_turns_over_within_a_travel_is_recovered(
     hard = ComposedModel(factory, [Term(term.effect, ("loading_gain", 0.0), tuple(
         sorted(term.context.items())))]).fit(replace(run, y=y))
     assert np.sqrt(np.mean((hard.predict(replace(run, y=y)) - y) ** 2)) > 3 * err
+
+
+def test_a_cubic_softening_the_record_cannot_tell_from_a_tanh_is_named_cubic() -> None:
+    # a tanh stop contains a cubic softening as its scale grows: within the noise's scatter
+    # of the identification error, the simpler form is the answer
+    run = injected_runs("gamma", {"saturation:cubic": 1.0}, kinds=("sine_decay",))[0]
+    run = run.segment(0, 750, role=run.role, suffix="head")
+    factory = base_factory_for("gamma", constraint="free", fit_offset=True)
+    m = fit_with_effect(factory, [], CANDIDATES["saturation"], run)
+    assert m.terms[-1].form == "cubic"
