@@ -432,9 +432,7 @@ class Asymmetry(Effect):
     )
     term = ("one-way backlash: c * m(t), m = 0 before the first motion, 1 after (a loop-centre "
             "shift born at once); loading_gain: c1 (y_base - centre) s(t) + c2 s(t), the "
-            "branches steeper one way (s = +-1, the direction of motion, or a centred play's "
-            "state in [-1, 1] that turns over within a travel after each reversal); "
-            "pull_push_gain: "
+            "branches steeper one way (s = +-1, the direction of motion); pull_push_gain: "
             "c (y_base - kink) on the pull side of a kink only, the kink at centre + k half "
             "(k on a grid, refined: the plant's rest, off the recorded range's centre when one "
             "side's gain differs)")
@@ -450,31 +448,19 @@ class Asymmetry(Effect):
     def form_grid(self, ident: RunData) -> list[Any]:
         # the pull/push kink sits at the plant's rest, which a side's gain moves off the
         # recorded range's centre (a push side at 0.75 moves it by 0.14 of the half-range)
-        # loading_gain's direction switches at once (0) or over a travel after each reversal
-        # (a fraction of the input span: pre-sliding, a centred play's state)
-        return [*[("loading_gain", r) for r in (0.0, 0.01, 0.03)],
+        return [("loading_gain", 0.0),
                 *[("pull_push_gain", k) for k in (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)]]
 
     def context(self, ident: RunData) -> Ctx:
         return {"centre": 0.5 * float(ident.y.max() + ident.y.min()),
-                "half": 0.5 * float(np.ptp(ident.y)), "span": float(np.ptp(ident.u))}
-
-    @staticmethod
-    def direction_state(run: RunData, r: float) -> FloatArray:
-        """The loading/unloading state: the direction of motion (``r`` = 0), or a centred
-        play's state ``(u - play_r(u)) / r`` in [-1, 1], which takes ``2 r`` of travel to turn
-        over after a reversal."""
-        if r <= 0.0:
-            return run.s
-        return np.asarray((run.u - play(run.u, r, z0=float(run.u[0]))) / r, dtype=np.float64)
+                "half": 0.5 * float(np.ptp(ident.y))}
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
         form = self.form(theta)
         if form == "loading_gain":
             # the branches' slopes differ by direction, and so does their offset: the
             # branches of a backlash whose two sides differ in slope
-            d = self.direction_state(run, float(theta[-1]) * ctx.get("span", 0.0))
-            return np.column_stack([(y_base - ctx["centre"]) * d, d])
+            return np.column_stack([(y_base - ctx["centre"]) * run.s, run.s])
         if form == "pull_push_gain":
             kink = ctx["centre"] + float(theta[-1]) * ctx.get("half", 0.0)
             return np.asarray(np.maximum(y_base - kink, 0.0)[:, None], dtype=np.float64)

@@ -79,32 +79,6 @@ def test_a_first_order_lag_of_the_output_is_recovered_as_a_relaxation() -> None:
     assert np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2)) < 0.005 * np.ptp(y)
 
 
-def test_a_loading_gain_whose_direction_turns_over_within_a_travel_is_recovered() -> None:
-    # y' = c + (y - c)(1 + a s), s a centred play's state: the gain changes over the travel
-    # the direction takes to turn over after a reversal (pre-sliding), not at once
-    from hysteresis.discrepancy._ops import play
-
-    run, y0 = _ident()
-    span = float(np.ptp(run.u))
-    r = 0.03 * span
-    s = (run.u - play(run.u, r, z0=float(run.u[0]))) / r
-    c = 0.5 * float(y0.max() + y0.min())
-    y = c + (y0 - c) * (1.0 + 0.1 * s)
-    factory = base_factory_for("gamma", constraint="free", fit_offset=True)
-    m = fit_with_effect(factory, [], CANDIDATES["asymmetry"], replace(run, y=y))
-    term = m.terms[-1]
-    assert term.form == "loading_gain"
-    assert float(term.theta[-1]) * term.context["span"] == pytest.approx(r, rel=0.2)
-    err = np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2))
-    assert err < 0.01 * np.ptp(y)
-    # a direction that switches at once leaves several times more
-    from hysteresis.discrepancy.effects import ComposedModel, Term
-
-    hard = ComposedModel(factory, [Term(term.effect, ("loading_gain", 0.0), tuple(
-        sorted(term.context.items())))]).fit(replace(run, y=y))
-    assert np.sqrt(np.mean((hard.predict(replace(run, y=y)) - y) ** 2)) > 3 * err
-
-
 def test_a_cubic_softening_the_record_cannot_tell_from_a_tanh_is_named_cubic() -> None:
     # a tanh stop contains a cubic softening as its scale grows: within the noise's scatter
     # of the identification error, the simpler form is the answer
