@@ -295,20 +295,62 @@ class GammaModel(StatefulModel):
             constraint, _ = choose_form(
                 lambda form: type(self)(**{**params, "constraint": form}), AUTO_FORMS, recs)
         sse, p, x, lam, pos = self._best_fit(recs, constraint)
-        n = p.size
         self.start_position_ = pos
         self.thresholds_ = p
+        self.constraint_ = constraint
+        self._take_solution(recs, x, lam, sse)
+        return self
+
+    def refit_weights(self, u: Any, y: Any) -> GammaModel:
+        """Re-solve the weights (and offsets) for a new output ``y`` over the same input, the
+        fitted thresholds, start position and constraint kept: one least squares, no screening
+        of the setup. A backfitting loop refits one input many times against outputs that
+        differ by a small term; :meth:`fit` once more at its end re-chooses the setup."""
+        self.check_fitted()
+        recs = check_records(u, y)
+        p, pos = self.thresholds_, float(self.start_position_)
+        plays, a, q, r = self._refit_design(recs, p, pos)
+        if a.shape[0] < a.shape[1]:
+            raise HysteresisError(f"need at least {a.shape[1]} samples to fit, got {a.shape[0]}")
+        # the same minimiser on the QR-reduced k x k problem (the design is factored once)
+        x, lam = solve_play_weights(r, q.T @ recs.y, n_weights=p.size,
+                                    constraint=str(self.constraint_))
+        n = p.size
+        if x.size > n + 1:
+            resid = plays @ x[:n] + float(np.mean(x[n:])) - recs.y
+        else:
+            resid = a @ x - recs.y
+        self._take_solution(recs, x, lam, float(resid @ resid))
+        return self
+
+    def _refit_design(self, recs: Records, p: FloatArray, pos: float
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """(plays, design, Q, R) over the records' input: the last ones when the input,
+        thresholds and start are those of the previous :meth:`refit_weights`."""
+        key = (recs.u.tobytes(), p.tobytes(), pos, recs.bounds)
+        cached = getattr(self, "_refit_cache", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        plays = np.asarray(self._plays(recs, p, pos), dtype=np.float64)
+        a = np.asarray(self._design(plays, recs), dtype=np.float64)
+        with single_thread_blas():
+            q, r = np.linalg.qr(a)
+        self._refit_cache = (key, (plays, a, q, r))
+        return plays, a, q, r
+
+    def _take_solution(self, recs: Records, x: FloatArray, lam: float, sse: float) -> None:
+        """Set the fitted weights, offsets and statistics from a solution ``x``."""
+        n = self.thresholds_.size
         self.weights_ = np.ascontiguousarray(x[:n])
         offsets = np.asarray(x[n:], dtype=np.float64)
         self.offset_ = float(np.mean(offsets)) if offsets.size else 0.0
+        self.__dict__.pop("record_offsets_", None)
         if offsets.size > 1:
             self.record_offsets_ = offsets
         self.lagrange_multiplier_ = lam
-        self.constraint_ = constraint
         self.sse_ = sse
         self.n_samples_ = int(recs.u.size)
         self.input_span_ = float(np.ptp(recs.u))
-        return self
 
     def _best_fit(self, recs: Records, constraint: str
                   ) -> tuple[float, FloatArray, FloatArray, float, float]:

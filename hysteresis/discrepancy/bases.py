@@ -53,6 +53,21 @@ class PlaySumModel(HysteresisModel):
         self.weights_ = np.asarray(x[: r.size], dtype=np.float64)
         self.offset_ = float(x[r.size] - x[r.size + 1])
         self.u0_ = float(uu[0])
+        self._design_for = (uu, a)
+        return self
+
+    def refit_weights(self, u: Any, y: Any) -> PlaySumModel:
+        """Re-solve the weights and offset for a new output over the same input (the
+        thresholds kept; the play columns reused when ``u`` is the input of the last solve)."""
+        self.check_fitted()
+        uu, yy = check_pair(u, y)
+        last_u, a = getattr(self, "_design_for", (None, None))
+        if last_u is None or last_u.shape != uu.shape or not np.array_equal(last_u, uu):
+            a = self._design(uu, self.thresholds_)
+        x, _ = nnls(np.column_stack([a, -a[:, -1]]), yy, maxiter=50 * a.shape[1])
+        self.weights_ = np.asarray(x[: self.thresholds_.size], dtype=np.float64)
+        self.offset_ = float(x[self.thresholds_.size] - x[self.thresholds_.size + 1])
+        self._design_for = (uu, a)
         return self
 
     def predict(self, u: Any, *, state: Any = None) -> FloatArray:

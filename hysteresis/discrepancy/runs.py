@@ -98,8 +98,9 @@ class RunData:
                        whole=self if keep_history and start > 0 else None,
                        offset=start if keep_history else 0)
 
-    @property
+    @cached_property
     def dt(self) -> float:
+        """Median sample interval, s (a term's low-pass filter asks for it at every refit)."""
         return float(np.median(np.diff(self.t)))
 
     @property
