@@ -100,7 +100,7 @@ def injector_runs(plant: str, effects: dict[str, float], start: str, ragged: str
     import pandas as pd
 
     from hysteresis.discrepancy.inject import injected_runs, ragged_tension
-    from pipelines.discrepancy import channel_values
+    from pipelines.discrepancy_data import channel_values
 
     runs = injected_runs(plant, effects, start=start, seed=seed)
     if ragged is None:

@@ -330,7 +330,7 @@ class GammaModel(StatefulModel):
         key = (recs.u.tobytes(), p.tobytes(), pos, recs.bounds)
         cached = getattr(self, "_refit_cache", None)
         if cached is not None and cached[0] == key:
-            return cached[1]
+            return cast("tuple[FloatArray, FloatArray, FloatArray, FloatArray]", cached[1])
         plays = np.asarray(self._plays(recs, p, pos), dtype=np.float64)
         a = np.asarray(self._design(plays, recs), dtype=np.float64)
         with single_thread_blas():

@@ -61,8 +61,10 @@ class PlaySumModel(HysteresisModel):
         thresholds kept; the play columns reused when ``u`` is the input of the last solve)."""
         self.check_fitted()
         uu, yy = check_pair(u, y)
-        last_u, a = getattr(self, "_design_for", (None, None))
-        if last_u is None or last_u.shape != uu.shape or not np.array_equal(last_u, uu):
+        cached: tuple[FloatArray, FloatArray] | None = getattr(self, "_design_for", None)
+        if cached is not None and cached[0].shape == uu.shape and np.array_equal(cached[0], uu):
+            a = cached[1]
+        else:
             a = self._design(uu, self.thresholds_)
         x, _ = nnls(np.column_stack([a, -a[:, -1]]), yy, maxiter=50 * a.shape[1])
         self.weights_ = np.asarray(x[: self.thresholds_.size], dtype=np.float64)

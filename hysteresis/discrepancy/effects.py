@@ -652,8 +652,9 @@ class ComposedModel:
 
     Input-side terms transform the input (in order); the base is fitted on the transformed
     input. Output-side terms add features whose coefficients are fitted jointly with the base
-    by backfitting (alternate: base on ``y - g``, coefficients on ``y - base``), which converges
-    to the joint least-squares solution for bases that are themselves least-squares fits.
+    by backfitting (alternate: base on ``y - g``, coefficients on ``y - base``; accelerated,
+    :meth:`_backfit`), which converges to the joint least-squares solution for bases that are
+    themselves least-squares fits and terms that do not read the base's prediction.
     """
 
     def __init__(self, base_factory: BaseFactory, terms: Sequence[Term] = (), *,
@@ -748,12 +749,11 @@ class ComposedModel:
         return self
 
     def _rounds(self, base: HysteresisModel) -> int:
-        """Backfitting rounds. A term that reads the base's own prediction (a stop, a gain by
-        direction or side) couples the two fits, and the alternation then converges slowly:
-        in 8 rounds a tanh stop of known size was fitted 11 % short and lost to a cubic
-        softening (exact in 40). A base fitted in closed form gets :data:`FAST_ROUNDS` x more
-        (the tolerance still ends it early); an iterative one keeps the count, since each of
-        its rounds is a full fit."""
+        """Backfitting steps at most. A term that reads the base's own prediction (a stop, a
+        gain by direction or side) couples the two fits, and the alternation then converges
+        slowly even accelerated (:class:`_Anderson`). A base fitted in closed form gets
+        :data:`FAST_ROUNDS` x more (the tolerance ends it early); an iterative one keeps the
+        count, since each of its steps is a full fit."""
         coupled = any(t.uses_base for t in self.terms if t.n_linear > 0)
         fast = getattr(base, "family", "") in FAST_FAMILIES
         return self.iterations * (FAST_ROUNDS if coupled and fast else 1)
@@ -821,35 +821,35 @@ class ComposedModel:
         once at its end; should that full fit choose another structure, the alternation runs
         once more from it."""
         refit = hasattr(base, "refit_weights")
-        state = {"base": base, "known": None, "g": np.zeros_like(y)}
+        st = _BackfitState(base, np.zeros_like(y))
 
         def step(yb: FloatArray) -> tuple[FloatArray, float]:
-            phi = self._features(run, yb, state["known"])
+            phi = self._features(run, yb, st.known)
             coef = _lstsq(phi, y - yb)
-            state["g"] = phi @ coef
+            st.g = phi @ coef
             if refit:
-                state["base"].refit_weights(u, y - state["g"])
+                st.base.refit_weights(u, y - st.g)  # type: ignore[attr-defined]
             else:
-                state["base"] = self.base_factory()
-                state["base"].fit(u, y - state["g"])
-            out = np.asarray(state["base"].predict(u), dtype=np.float64)
-            state["known"] = coef
+                st.base = self.base_factory()
+                st.base.fit(u, y - st.g)
+            out = np.asarray(st.base.predict(u), dtype=np.float64)
+            st.known = coef
             return out, float(np.sum((y - out - self._features(run, out, coef) @ coef) ** 2))
 
         yb = np.asarray(base.predict(u), dtype=np.float64)
         for _ in range(2 if refit else 1):
-            yb = _Anderson(step, self._rounds(state["base"]), self.tol).solve(yb)
+            yb = _Anderson(step, self._rounds(st.base), self.tol).solve(yb)
             if not refit:
                 break
             full = self.base_factory()
-            full.fit(u, y - state["g"])
+            full.fit(u, y - st.g)
             y_full = np.asarray(full.predict(u), dtype=np.float64)
             same = np.allclose(y_full, yb, rtol=0.0, atol=1e-9 * (1.0 + float(np.ptp(y))))
-            state["base"], yb = full, y_full
+            st.base, yb = full, y_full
             if same:
                 break
-        phi = self._features(run, yb, state["known"])
-        return state["base"], _lstsq(phi, y - yb)
+        phi = self._features(run, yb, st.known)
+        return st.base, _lstsq(phi, y - yb)
 
     def predict(self, run: RunData) -> FloatArray:
         if not hasattr(self, "base_"):
@@ -872,6 +872,16 @@ class ComposedModel:
     @property
     def n_params(self) -> int:
         return sum(t.effect.n_params for t in self.terms)
+
+
+@dataclass
+class _BackfitState:
+    """What a backfitting step leaves for the next: the base, the terms' contribution ``g``
+    it was fitted against and their coefficients (``known``: none before the first step)."""
+
+    base: HysteresisModel
+    g: FloatArray
+    known: FloatArray | None = None
 
 
 class _Anderson:
