@@ -406,6 +406,9 @@ class Drift(Effect):
     has_theta = True
     first_form = "exponential"
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {"linear": ("output", 1, False)}
+    #: c (1 - exp(-t / tau)) = (c / tau) t - ... : a linear creep as tau outgrows the record
+    #: (on the injector's linear creep a tau of 10 records won by noise on two plants)
+    nests: ClassVar[dict[str, str]] = {"exponential": "linear"}
 
     def grid(self, ident: RunData) -> list[Any]:
         dur = float(np.max(ident.ts))  # the longest identification record
