@@ -279,8 +279,12 @@ class TendonElongation(Effect):
     #: error), and the output tension follows the output through the follower's spring, so a
     #: term linear in it is a gain (with a free sign it also took up a speed-dependent
     #: friction the output load cell feels, on clean-room runs).
+    #: reading (reported as square_input): c (T_in^2 - T_in(0)^2) on the reading itself, a
+    #: stretch by the input tension's square between the friction and the output's sensor
+    #: (the friction does not hold it back).
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
-        "square_output": ("output", 1, False)}
+        "square_output": ("output", 1, False), "reading": ("output", 1, False)}
+    labels: ClassVar[dict[str, str]] = {"reading": "square_input"}
     #: Play thresholds averaged over the friction path (the profile's quadrature).
     n_profile = 8
     #: Profiles kept for the refinement of c (a run's few (R, w) points).
@@ -302,13 +306,17 @@ class TendonElongation(Effect):
                 for c in (0.03, 0.08, 0.17, 0.35, 0.7)] + self.form_grid(ident)
 
     def form_grid(self, ident: RunData) -> list[Any]:
-        out: list[Any] = []
+        out: list[Any] = [("reading", 0.0)]
         if ident.tension_out is not None:
             out += [("square_output", 0.0)]
         return out
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
         form = theta[0]
+        if form == "reading":
+            t_in = run.tension if run.tension is not None else np.zeros(run.n)
+            x = (t_in**2 - t_in[0] ** 2) / ctx["tension_scale"]
+            return np.asarray(x[:, None], dtype=np.float64)
         t = run.tension_out
         if t is None:
             raise HysteresisError(f"run {run.run_id}: form {form} of tendon_elongation needs "
