@@ -452,7 +452,7 @@ if __name__ == "__main__":
     part = parser.add_mutually_exclusive_group()
     part.add_argument("--injector", action="store_true",
                       help="only the independent injector's matrix, every form at two "
-                           "strengths (176 sources: about 1.5-2 h of one core)")
+                           "strengths (176 sources: about 40 min of one core)")
     part.add_argument("--bases", action="store_true",
                       help="only the base-independence table (about 25 min on 2 cores)")
     part.add_argument("--cleanroom", action="store_true",
