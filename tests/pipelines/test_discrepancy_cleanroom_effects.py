@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 
 from hysteresis.discrepancy.analysis import analyse
+from hysteresis.discrepancy.workflow import WorkflowSettings
 from pipelines.discrepancy_data import ingest_source, runs_from_dataset
 
 CLEANROOM = Path(__file__).resolve().parents[1] / "cleanroom"
@@ -32,13 +33,14 @@ def generator() -> Any:
 
 
 def _answer(generator: Any, tmp: Path, plant: str, effect: str | None, form: str | None,
-            loaded: str | None = None) -> dict[str, Any]:
+            loaded: str | None = None, max_effects: int | None = None) -> dict[str, Any]:
     truth = generator.write_source(tmp / "src", plant, effect, form, "strong", loaded=loaded,
                                    truth_file=False)
     rows, meta, _ = ingest_source(tmp / "src" / truth["source_id"], tmp / "work")
     runs = runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)
+    settings = None if max_effects is None else WorkflowSettings(max_effects=max_effects)
     rep, _ = analyse(runs, base_family="gamma", base_params=BASE, auto_families={},
-                     base_check=False)
+                     base_check=False, settings=settings)
     return rep
 
 
@@ -49,7 +51,9 @@ def _answer(generator: Any, tmp: Path, plant: str, effect: str | None, form: str
 ])
 def test_a_hidden_form_is_named_with_its_effect(generator: Any, tmp_path: Path, effect: str,
                                                 form: str, named: tuple[str, str]) -> None:
-    rep = _answer(generator, tmp_path, "play_sum", effect, form)
+    # the first name is what is checked: the search for a second effect (the pair search
+    # after it, 2/3 of the time) is left out to keep make test inside its 5 minutes
+    rep = _answer(generator, tmp_path, "play_sum", effect, form, max_effects=1)
     first = rep["effects"][0]
     assert (first["name"], first["form"]) == named
     assert rep["summary"]["heldout_reduction"] >= 0.5
