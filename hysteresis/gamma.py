@@ -297,8 +297,7 @@ class GammaModel(StatefulModel):
         sse, p, x, lam, pos = self._best_fit(recs, constraint)
         self.start_position_ = pos
         self.thresholds_ = p
-        self.constraint_ = constraint
-        self._take_solution(recs, x, lam, sse)
+        self._take_solution(recs, x, lam, sse, constraint)
         return self
 
     def refit_weights(self, u: Any, y: Any) -> GammaModel:
@@ -320,7 +319,7 @@ class GammaModel(StatefulModel):
             resid = plays @ x[:n] + float(np.mean(x[n:])) - recs.y
         else:
             resid = a @ x - recs.y
-        self._take_solution(recs, x, lam, float(resid @ resid))
+        self._take_solution(recs, x, lam, float(resid @ resid), str(self.constraint_))
         return self
 
     def _refit_design(self, recs: Records, p: FloatArray, pos: float
@@ -338,8 +337,10 @@ class GammaModel(StatefulModel):
         self._refit_cache = (key, (plays, a, q, r))
         return plays, a, q, r
 
-    def _take_solution(self, recs: Records, x: FloatArray, lam: float, sse: float) -> None:
-        """Set the fitted weights, offsets and statistics from a solution ``x``."""
+    def _take_solution(self, recs: Records, x: FloatArray, lam: float, sse: float,
+                       constraint: str) -> None:
+        """Set the fitted weights, offsets and statistics from a solution ``x`` (in the order
+        a saved model lists them)."""
         n = self.thresholds_.size
         self.weights_ = np.ascontiguousarray(x[:n])
         offsets = np.asarray(x[n:], dtype=np.float64)
@@ -348,6 +349,7 @@ class GammaModel(StatefulModel):
         if offsets.size > 1:
             self.record_offsets_ = offsets
         self.lagrange_multiplier_ = lam
+        self.constraint_ = constraint
         self.sse_ = sse
         self.n_samples_ = int(recs.u.size)
         self.input_span_ = float(np.ptp(recs.u))
