@@ -46,15 +46,19 @@ class PlaySumModel(HysteresisModel):
         uu, yy = check_pair(u, y)
         r = self._r(uu)
         a = self._design(uu, r)
-        # Non-negative weights (any gain: mm -> deg on a bending joint); the free offset is
-        # split into a positive and a negative part so that NNLS can carry it.
-        x, _ = nnls(np.column_stack([a, -a[:, -1]]), yy, maxiter=50 * a.shape[1])
         self.thresholds_ = r
-        self.weights_ = np.asarray(x[: r.size], dtype=np.float64)
-        self.offset_ = float(x[r.size] - x[r.size + 1])
+        self._solve(a, yy)
         self.u0_ = float(uu[0])
         self._design_for = (uu, a)
         return self
+
+    def _solve(self, a: FloatArray, yy: FloatArray) -> None:
+        # Non-negative weights (any gain: mm -> deg on a bending joint); the free offset is
+        # split into a positive and a negative part so that NNLS can carry it.
+        x, _ = nnls(np.column_stack([a, -a[:, -1]]), yy, maxiter=50 * a.shape[1])
+        n = self.thresholds_.size
+        self.weights_ = np.asarray(x[:n], dtype=np.float64)
+        self.offset_ = float(x[n] - x[n + 1])
 
     def refit_weights(self, u: Any, y: Any) -> PlaySumModel:
         """Re-solve the weights and offset for a new output over the same input (the
@@ -66,9 +70,7 @@ class PlaySumModel(HysteresisModel):
             a = cached[1]
         else:
             a = self._design(uu, self.thresholds_)
-        x, _ = nnls(np.column_stack([a, -a[:, -1]]), yy, maxiter=50 * a.shape[1])
-        self.weights_ = np.asarray(x[: self.thresholds_.size], dtype=np.float64)
-        self.offset_ = float(x[self.thresholds_.size] - x[self.thresholds_.size + 1])
+        self._solve(a, yy)
         self._design_for = (uu, a)
         return self
 
