@@ -102,8 +102,11 @@ class Configuration(_Model):
 
 
 class MixedTerm(_Model):
+    """One ``{amplitude, frequency_hz, phase_rad}`` term; frequency 0 is a constant term
+    (``amplitude * sin(phase_rad)``), which a recorder uses to start the motion at zero."""
+
     amplitude: Annotated[float, Field(ge=-1e4, le=1e4)] | None = None
-    frequency_hz: Annotated[float, Field(gt=0.0, le=1e4)] | None = None
+    frequency_hz: Annotated[float, Field(ge=0.0, le=1e4)] | None = None
     phase_rad: Annotated[float, Field(ge=-1e3, le=1e3)] | None = None
 
 

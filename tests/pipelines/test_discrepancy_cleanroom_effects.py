@@ -63,3 +63,13 @@ def test_a_hidden_form_is_named_with_its_effect(generator: Any, tmp_path: Path, 
 def test_a_clean_plant_that_starts_loaded_names_nothing(generator: Any, tmp_path: Path) -> None:
     rep = _answer(generator, tmp_path, "play_sum", None, None, loaded="above")
     assert rep["effects"] == []
+
+
+def test_every_run_of_a_cleanroom_source_is_ingested(generator: Any, tmp_path: Path) -> None:
+    # its multisine run's manifest lists the constant that starts the motion at zero as a
+    # term of frequency 0: a valid term, not a reason to refuse the run
+    truth = generator.write_source(tmp_path / "src", "play_sum", None, None, truth_file=False)
+    _, meta, rep = ingest_source(tmp_path / "src" / truth["source_id"], tmp_path / "work")
+    assert rep["rejected"] == []
+    kinds = sorted(m["manifest"]["excitation"]["kind"] for m in meta.values())
+    assert kinds == ["mixed_sine", "sine_decay", "triangle_decay"]
