@@ -93,6 +93,8 @@ def settings(cfg: Any) -> Settings:
         raise DiscrepancyError(REQUIRED["source"])
     if not s.report:
         raise DiscrepancyError(REQUIRED["report"])
+    if s.workers < 0:
+        raise DiscrepancyError(f"workers={s.workers}: must be >= 0 (0: one per core)")
     return s
 
 
@@ -142,9 +144,10 @@ def run(cfg: Any) -> Result:
 
 
 def workflow_settings(s: Settings) -> WorkflowSettings:
-    """The workflow's knobs as the stage runs them: its progress bars follow the stage's."""
+    """The workflow's knobs as the stage runs them: its progress bars and its number of
+    worker processes follow the stage's."""
     return dataclasses.replace(s.workflow, candidates=tuple(s.workflow.candidates),
-                               progress=s.progress)
+                               progress=s.progress, workers=s.workers)
 
 
 def _check_outputs(s: Settings) -> None:

@@ -45,6 +45,7 @@ from hysteresis.discrepancy.evidence import corroboration
 from hysteresis.discrepancy.identifiability import statement
 from hysteresis.discrepancy.library import screen
 from hysteresis.discrepancy.locate import autocorrelation, locate
+from hysteresis.discrepancy.parallel import map_ordered
 from hysteresis.discrepancy.runs import RunData, concat_runs
 
 
@@ -83,6 +84,10 @@ class WorkflowSettings:
     #: measurement-noise floor (:func:`.locate.noise_floor`); a larger residual that no
     #: candidate explains is ``unexplained``, never called clean.
     clean_factor: float = 5.0
+    #: Processes that score the candidates (forked; 0: every core this process may use,
+    #: 1: in this process; the stage sets it from its own ``workers``). The answer does not
+    #: depend on it.
+    workers: int = 1
     progress: bool = False
 
 
@@ -254,23 +259,27 @@ def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: 
     r0 = current.per_run_rmse(groups)
     best: list[dict[str, Any]] = []
     best_bic = np.inf
-    for i, j in combinations(range(len(pool)), 2):  # sorted by delta BIC: a is the better one
-        if i >= lead:
-            break
-        a, b = pool[i], pool[j]
+    # sorted by delta BIC: a is the better one
+    pairs = [(i, j) for i, j in combinations(range(len(pool)), 2) if i < lead]
+
+    def second(pair: tuple[int, int]) -> dict[str, Any]:
+        a, b = pool[pair[0]], pool[pair[1]]
         on_a = {g.key: list(a["models"][g.key].terms) for g in groups}
-        try:
-            s2 = score_candidate(CANDIDATES[b["name"]], base_factory, groups, on_a, a["after"],
-                                 n_eff, load_cells[b["name"]], joint_retune=st.joint_retune)
-        except HysteresisError:
+        return score_candidate(CANDIDATES[b["name"]], base_factory, groups, on_a, a["after"],
+                               n_eff, load_cells[b["name"]], joint_retune=st.joint_retune)
+
+    scored = map_ordered(second, pairs, workers=st.workers, expected=(HysteresisError,))
+    for (i, j), s2 in zip(pairs, scored, strict=True):
+        if isinstance(s2, BaseException):
             continue
+        a, b = pool[i], pool[j]
         h1 = s2["heldout_rmse_after"]
         k = a["n_params"] + s2["n_params"]
         d_bic = delta_bic(h0, h1, k, n_eff)
         r1 = s2["after"].per_run_rmse(groups)
         gain = 1.0 - h1 / h0 if h0 > 0 else 0.0
         joint = {"names": [a["name"], b["name"]], "relative_gain": gain, "delta_bic": d_bic,
-                 "n_params": k, "runs_improved": float(np.mean([r1[i] < r0[i] for i in r0])),
+                 "n_params": k, "runs_improved": float(np.mean([r1[r] < r0[r] for r in r0])),
                  "gain_over_better_member": gain - max(a["relative_gain"], b["relative_gain"]),
                  "heldout_rmse_before": h0, "heldout_rmse_after": h1}
         if (gain >= st.min_relative_gain and d_bic <= st.max_delta_bic
@@ -434,17 +443,21 @@ def _score_all(remaining: Sequence[str], base_factory: BaseFactory, groups: Sequ
                failed: dict[str, str]) -> list[dict[str, Any]]:
     """Every remaining candidate scored against the current model, best delta BIC first; a
     candidate the base cannot be refitted with goes to ``failed`` with the reason."""
+    def score(name: str) -> dict[str, Any]:
+        return score_candidate(CANDIDATES[name], base_factory, groups, terms, current, n_eff,
+                               load_cells[name], joint_retune=st.joint_retune)
+
     scores = []
-    it = tqdm(remaining, desc=f"round {round_}: candidates", disable=not st.progress)
-    for name in it:
-        try:
-            scores.append(score_candidate(CANDIDATES[name], base_factory, groups, terms,
-                                          current, n_eff, load_cells[name],
-                                          joint_retune=st.joint_retune))
-        except HysteresisError as err:
+    results = map_ordered(score, remaining, workers=st.workers, expected=(HysteresisError,))
+    it = tqdm(zip(remaining, results, strict=True), total=len(remaining),
+              desc=f"round {round_}: candidates", disable=not st.progress)
+    for name, result in it:
+        if isinstance(result, BaseException):
             # The base cannot be refitted with this term (e.g. a density that no longer
             # fits): the candidate is reported as not scorable, the others go on.
-            failed[name] = str(err)
+            failed[name] = str(result)
+        else:
+            scores.append(result)
     scores.sort(key=lambda s: s["delta_bic"])
     return scores
 

@@ -113,7 +113,7 @@ def test_discrepancy_workflow_is_a_typed_node_with_its_defaults_in_one_place() -
     typed = settings(plain)
     assert typed.workflow == WorkflowSettings(max_effects=2, candidates=list(defaults[
         "candidates"]))  # a list in the config; the workflow's own tuple below
-    assert workflow_settings(typed) == WorkflowSettings(max_effects=2, progress=True)
+    assert workflow_settings(typed) == WorkflowSettings(max_effects=2, progress=True, workers=0)
     for bad in ("workflow.max_efects=2", "workflow.max_effects=two"):
         with pytest.raises(ConfigCompositionException):
             _compose("discrepancy", [bad])

@@ -96,6 +96,11 @@ def test_stage_rejects_a_missing_source(tmp_path: Path):
         stage(cfg(tmp_path / "nope", tmp_path / "r.json"))
 
 
+def test_stage_refuses_a_negative_number_of_workers_before_reading(tmp_path: Path):
+    with pytest.raises(DiscrepancyError, match=r"workers=-1: must be >= 0"):
+        stage(cfg(tmp_path / "nope", tmp_path / "r.json", workers=-1))
+
+
 def test_real_catheter_runs_get_an_effect_that_reduces_heldout_error(tmp_path: Path,
                                                                      catheter_dir: Path):
     mapping = OmegaConf.to_container(
