@@ -14,6 +14,7 @@ locate -> name -> add loop, and the ratio against the reference joint refit by b
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from typing import Any
@@ -33,6 +34,12 @@ def _time(fn: Any, repeat: int = 2) -> tuple[float, Any]:
         out = fn()
         best = min(best, time.perf_counter() - t0)
     return best, out
+
+
+def _cpu() -> float:
+    """CPU seconds of this process and of its reaped children (the forked workers)."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
 
 
 def run() -> dict[str, Any]:
@@ -123,7 +130,8 @@ def first_form_cases() -> dict[str, tuple[dict[str, float], str, str | None]]:
 
 
 def injector_sources(cases: dict[str, tuple[dict[str, float], str, str | None]] | None = None,
-                     plants: tuple[str, ...] | None = None) -> dict[str, Any]:
+                     plants: tuple[str, ...] | None = None, *, workers: int = 0
+                     ) -> dict[str, Any]:
     """What ``make discrepancy`` does (:func:`pipelines.discrepancy.analyse`: automatic base,
     the workflow, a second base when the first leaves a residual) on three 80 s runs from the
     independent injector (plain Gamma, Preisach and Bouc-Wen plants on one play loop, a
@@ -137,6 +145,7 @@ def injector_sources(cases: dict[str, tuple[dict[str, float], str, str | None]] 
     from hydra import compose, initialize_config_dir
 
     from hysteresis.discrepancy.inject import PLANTS, effect_and_form, identifiable
+    from hysteresis.discrepancy.workflow import WorkflowSettings
     from pipelines.common import CONF_DIR, to_container
     from pipelines.discrepancy import analyse
 
@@ -147,11 +156,12 @@ def injector_sources(cases: dict[str, tuple[dict[str, float], str, str | None]] 
         for plant in plants or PLANTS:
             runs = injector_runs(plant, effects, start, ragged,
                                  seed=int(case.split("#")[1]) if "#" in case else 0)
-            t0, c0 = time.perf_counter(), time.process_time()
+            t0, c0 = time.perf_counter(), _cpu()
             rep, _ = analyse(runs, auto_families=dict(cfg["auto_families"]),
                              max_bases=int(cfg["max_bases"]),
-                             base_retry_factor=float(cfg["base_retry_factor"]))
-            cpu = time.process_time() - c0
+                             base_retry_factor=float(cfg["base_retry_factor"]),
+                             settings=WorkflowSettings(workers=workers))
+            cpu = _cpu() - c0
             key = next(iter(effects), None)
             hidden = effect_and_form(key) if key else None
             ident = bool(key is None or identifiable(key, plant))
@@ -223,7 +233,7 @@ def score_answer(report: dict[str, Any], hidden: tuple[str, str] | None,
 def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None = None,
                      strengths: tuple[str, ...] = ("weak", "strong"),
                      forms: list[tuple[str, str]] | None = None,
-                     bases: tuple[str, ...] = ()) -> dict[str, Any]:
+                     bases: tuple[str, ...] = (), workers: int = 0) -> dict[str, Any]:
     """What ``make discrepancy`` answers (default settings) on the clean-room effect matrix
     (``tests/cleanroom/effects.py``: four plants, every form at each strength, clean sources
     at rest and loaded, ragged load-cell streams; ``tsm-rig-log/1`` run folders ingested as
@@ -231,13 +241,13 @@ def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None 
     ``bases``, also the first name with each base given (``base_check`` off).
 
     ``python -m bench.bench_discrepancy --cleanroom [--strong-only]`` runs it."""
-    import os
     import tempfile
     from pathlib import Path
 
     from hydra import compose, initialize_config_dir
 
     from hysteresis.discrepancy.runs import split_single_runs
+    from hysteresis.discrepancy.workflow import WorkflowSettings
     from pipelines.common import CONF_DIR, to_container
     from pipelines.discrepancy import analyse, ingest_source, runs_from_dataset
 
@@ -265,10 +275,11 @@ def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None 
                                      identify_excitations=list(cfg["identify_excitations"]),
                                      rate_hz=cfg["analysis_rate_hz"])
             runs, _ = split_single_runs(runs)
-            t0, c0 = time.perf_counter(), time.process_time()
+            t0, c0 = time.perf_counter(), _cpu()
             rep, _ = analyse(runs, auto_families=families, max_bases=int(cfg["max_bases"]),
-                             base_retry_factor=float(cfg["base_retry_factor"]))
-            seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+                             base_retry_factor=float(cfg["base_retry_factor"]),
+                             settings=WorkflowSettings(workers=workers))
+            seconds, cpu = time.perf_counter() - t0, _cpu() - c0
             eff = truth["effect"]
             hidden = CLEANROOM_NAMES[(eff, truth["form"])] if eff else None
             idf = truth["identifiability"]
@@ -470,6 +481,11 @@ if __name__ == "__main__":
                              "the clean sources are always run)")
     parser.add_argument("--with-bases", action="store_true",
                         help="with --cleanroom: also each auto family given as the base")
+    parser.add_argument("--workers", type=int, default=0,
+                        help="with --cleanroom or --injector: processes scoring each source's "
+                             "candidates (the stage's workers; default 0: one per core); the "
+                             "sources run one after another, so seconds are one source's wall "
+                             "time on this machine's cores")
     args = parser.parse_args()
     if args.injector:
         chosen = injector_cases(tuple(float(x) for x in args.strengths.split(",") if x)
@@ -479,14 +495,15 @@ if __name__ == "__main__":
             chosen = {k: v for k, v in chosen.items()
                       if k.startswith("clean") or k.split("@")[0] in keep}
         print(json.dumps(injector_sources(
-            chosen, tuple(p for p in args.plants.split(",") if p) or None), indent=1))
+            chosen, tuple(p for p in args.plants.split(",") if p) or None,
+            workers=args.workers), indent=1))
     elif args.bases:
         print(json.dumps(base_independence(), indent=1))
     elif args.cleanroom:
         res = cleanroom_matrix(
             plants=tuple(p for p in args.plants.split(",") if p) or None,
             strengths=("strong",) if args.strong_only else ("weak", "strong"),
-            bases=BASES if args.with_bases else ())
+            bases=BASES if args.with_bases else (), workers=args.workers)
         print(json.dumps(res["_summary"], indent=1))
     else:
         print(json.dumps(run(), indent=1))
