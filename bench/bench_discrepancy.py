@@ -295,6 +295,7 @@ def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None 
                    "heldout_reduction_vs_best_plain": round(float(
                        rep["summary"]["heldout_reduction_vs_best_plain"]), 3),
                    "rmse_over_noise": round(float(rep["residual"]["rmse_over_noise"]), 2),
+                   "chained": (rep.get("run_history") or {}).get("chained"),
                    **score_answer(rep, hidden, identifiable)}
             for base in bases:
                 params = {k: v for k, v in families[base].items() if k != "family"}
@@ -324,6 +325,7 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
         # the run has to itself, whatever else shares it while the bench runs
         "max_cpu_seconds": max((v["cpu_seconds"] for v in vals), default=0.0),
         "over_60_cpu_s": sum(v["cpu_seconds"] > 60 for v in vals),
+        "judged_after_earlier_runs": sum(bool(v.get("chained")) for v in vals),
         "identifiable": len(ident),
         "identifiable_named_first_and_halved": sum(v["hit"] for v in ident),
         "identifiable_name_first": sum(v["name_hit"] for v in ident),

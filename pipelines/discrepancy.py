@@ -28,7 +28,7 @@ import numpy as np
 from omegaconf.errors import MissingMandatoryValue, OmegaConfBaseException
 
 from hysteresis.base import HysteresisError
-from hysteresis.discrepancy.analysis import analyse
+from hysteresis.discrepancy.analysis import HISTORY_MODES, analyse
 from hysteresis.discrepancy.base_check import asks_best_family, best_family_answers
 from hysteresis.discrepancy.errors import DiscrepancyError
 from hysteresis.discrepancy.ranking import choose_base
@@ -93,6 +93,9 @@ def settings(cfg: Any) -> Settings:
         raise DiscrepancyError(REQUIRED["source"])
     if not s.report:
         raise DiscrepancyError(REQUIRED["report"])
+    if s.history not in HISTORY_MODES:
+        raise DiscrepancyError(
+            f"history={s.history}: must be one of {', '.join(HISTORY_MODES)}")
     if s.workers < 0:
         raise DiscrepancyError(f"workers={s.workers}: must be >= 0 (0: one per core)")
     return s
@@ -135,7 +138,7 @@ def run(cfg: Any) -> Result:
         auto_families=s.auto_families, settings=workflow_settings(s),
         ukf_evidence=s.ukf_evidence, base_check=s.base_check,
         base_misfit_factor=s.base_misfit_factor, base_misfit_fallback=s.base_misfit_fallback,
-        max_bases=s.max_bases, base_retry_factor=s.base_retry_factor)
+        max_bases=s.max_bases, base_retry_factor=s.base_retry_factor, history=s.history)
     report["run_choice"] = run_choice or None
     report["channels"] = channels
     report["source"] = str(Path(s.source).resolve())

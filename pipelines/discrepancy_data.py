@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -160,5 +161,21 @@ def _run_data(run_id: str, df: pd.DataFrame, meta: Mapping[str, Any], identify: 
         y=df[output_col].to_numpy(float), tension=tension,
         tension_out=tension_out, config=config, excitation=kind,
         role=_role(run_id, meta, kind, identify),
+        started_at=_started_at(meta),
     )
     return run, notes
+
+
+def _started_at(meta: Mapping[str, Any]) -> float | None:
+    """The manifest's ``started_at`` as POSIX seconds (None when absent or unreadable: the run
+    is then never taken as recorded after another)."""
+    stamp = (meta.get("manifest") or {}).get("started_at")
+    if not isinstance(stamp, str):
+        return None
+    try:
+        when = datetime.fromisoformat(stamp)
+    except ValueError:
+        return None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=UTC)
+    return when.timestamp()

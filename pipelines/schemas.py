@@ -180,6 +180,13 @@ class IdentificationConfig(TrackedStageConfig):
     #: A configuration recorded in one run only (and no run of the fit excitations): its head
     #: identifies, this last fraction is held out as excitation ``<kind>.tail``.
     single_run_heldout_fraction: float = 0.3
+    #: A held-out run recorded after others of its configuration (manifest ``started_at``)
+    #: may start where they left the mechanism, and a relative encoder zeroes the output
+    #: there: ``chained`` judges it from the state the earlier runs' input left (its output
+    #: moved to its own zero), ``separate`` from the start the base takes from the record,
+    #: ``auto`` chains when the best plain family then predicts the held-out runs 10 % better
+    #: (report: run_history).
+    history: str = "auto"
     signals: Signals = field(default_factory=Signals)
     #: Progress bars (tqdm, on stderr) while models are fitted or scored; false = none (fit then
     #: logs each finished model).
@@ -337,6 +344,13 @@ class DiscrepancyConfig:
     #: it is held out (the report's run_choice says so). Configurations with several runs use
     #: roles.
     single_run_heldout_fraction: float = 0.3
+    #: A held-out run recorded after others of its configuration (manifest ``started_at``)
+    #: may start where they left the mechanism, and a relative encoder zeroes the output
+    #: there: ``chained`` judges it from the state the earlier runs' input left (its output
+    #: moved to its own zero), ``separate`` from the start the base takes from the record,
+    #: ``auto`` chains when the best plain family then predicts the held-out runs 10 % better
+    #: (report: run_history).
+    history: str = "auto"
     signals: Signals = field(default_factory=Signals)
     #: Analyse at this rate (moving-average decimation; null = the dataset's own rate).
     analysis_rate_hz: float | None = 25.0

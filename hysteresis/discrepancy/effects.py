@@ -867,7 +867,12 @@ class ComposedModel:
             raise HysteresisError("ComposedModel is not fitted yet; call fit(run) first")
         if run.whole is not None:  # a later segment: from the state its record's input left
             full = self.predict(run.whole)
-            return np.asarray(full[run.offset:run.offset + run.n], dtype=np.float64)
+            seg = full[run.offset:run.offset + run.n]
+            if run.rezeroed:
+                # the run's output is zeroed at its first sample, where the mechanism stood in
+                # whatever state the earlier runs left: the prediction is the change from there
+                seg = seg - seg[0] + run.y[0]
+            return np.asarray(seg, dtype=np.float64)
         run = self._seen(run)
         if hasattr(self, "op_weights_"):
             yo = self._scaled_design(run, self.base_) @ self.op_weights_

@@ -51,6 +51,13 @@ class RunData:
     #: from the state the earlier input left (the input is known; no output before is used).
     whole: RunData | None = field(default=None, repr=False, compare=False)
     offset: int = 0
+    #: The output's zero is this run's own first sample (a relative encoder: tsm-rig-log/1
+    #: positions are relative to each run's first sample), not the zero of ``whole``: a model
+    #: predicting the whole record predicts the change from the run's first sample.
+    rezeroed: bool = False
+    #: When the recording started (POSIX seconds, from the manifest), or None: which run was
+    #: recorded just before which (:func:`chain_records`).
+    started_at: float | None = None
 
     def __post_init__(self) -> None:
         self.t = as_1d(self.t, f"{self.run_id}: t")
@@ -169,7 +176,7 @@ class RunData:
             tension_out=None if self.tension_out is None else dec(self.tension_out),
             config=dict(self.config), excitation=self.excitation, role=self.role,
             starts=tuple(sorted({int(np.ceil(s / factor)) for s in self.starts})),
-            record_start_s=self.record_start_s,
+            record_start_s=self.record_start_s, started_at=self.started_at,
         )
 
 
@@ -307,3 +314,68 @@ def concat_runs(runs: list[RunData], *, run_id: str | None = None) -> RunData:
         config=dict(runs[0].config), excitation="+".join(r.excitation for r in runs),
         role=runs[0].role, starts=tuple(starts),
     )
+
+
+def chain_records(runs: Sequence[RunData]) -> tuple[list[RunData], dict[str, list[str]]]:
+    """Each held-out run as the end of the session recorded before it: a rig that runs one
+    excitation after another without resetting the mechanism starts every run in the state the
+    last one left, and a relative encoder zeroes the output there, so that state sets the
+    whole run's output level, not only its first cycle.
+
+    Within a configuration, runs are ordered by ``started_at``; a held-out run recorded after
+    others gets ``whole`` = the earlier runs' input and its own, joined end to end (the
+    input held where the last run stopped; time made continuous, so a creep goes on across
+    the join), with ``rezeroed`` set: the model predicts the session and its prediction of
+    the run is moved to the run's own zero. Runs without a start time, segments of a record
+    and runs whose session lacks a tension channel the run carries are left as they are.
+    Returns the runs and, per chained run, the runs recorded before it."""
+    by: dict[str, list[RunData]] = {}
+    for r in runs:
+        by.setdefault(r.config_key, []).append(r)
+    chained: dict[str, RunData] = {}
+    before: dict[str, list[str]] = {}
+    for rs in by.values():
+        timed = sorted((r for r in rs if r.started_at is not None and r.whole is None),
+                       key=lambda r: (r.started_at, r.run_id))
+        for k, run in enumerate(timed):
+            if k == 0 or run.role != HELDOUT:
+                continue
+            session = timed[:k + 1]
+            if any((getattr(p, c) is None) != (getattr(run, c) is None)
+                   for p in session for c in ("tension", "tension_out")):
+                continue
+            whole = _joined(session, run.run_id)
+            n0 = whole.n - run.n
+            chained[run.run_id] = RunData(
+                run_id=run.run_id, t=run.t, u=run.u, y=run.y, tension=run.tension,
+                tension_out=run.tension_out,
+                config=dict(run.config), excitation=run.excitation, role=run.role,
+                whole=whole, offset=n0, rezeroed=True, started_at=run.started_at)
+            before[run.run_id] = [p.run_id for p in session[:-1]]
+    return [chained.get(r.run_id, r) for r in runs], before
+
+
+def _joined(session: Sequence[RunData], run_id: str) -> RunData:
+    """The session's runs end to end: each run's input moved so it starts where the last
+    stopped, its time so it follows on one sample later."""
+    ts, us, ys, t1, t2 = [], [], [], [], []
+    t_next, u_end = 0.0, 0.0
+    for k, r in enumerate(session):
+        shift = 0.0 if k == 0 else u_end - float(r.u[0])
+        ts.append(r.t - r.t[0] + t_next)
+        us.append(r.u + shift)
+        ys.append(r.y)
+        t1.append(r.tension)
+        t2.append(r.tension_out)
+        t_next = float(ts[-1][-1]) + r.dt
+        u_end = float(us[-1][-1])
+    last = session[-1]
+
+    def cat(xs: list[FloatArray | None]) -> FloatArray | None:
+        return None if any(x is None for x in xs) else np.concatenate(
+            [x for x in xs if x is not None])
+
+    return RunData(run_id=f"{run_id}:session", t=np.concatenate(ts), u=np.concatenate(us),
+                   y=np.concatenate(ys), tension=cat(t1), tension_out=cat(t2),
+                   config=dict(last.config), excitation=last.excitation, role=last.role,
+                   record_start_s=float(ts[0][0]))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -147,6 +148,8 @@ class Evaluation:
 
     ident_pred: dict[str, FloatArray] = field(default_factory=dict)
     held_pred: dict[str, FloatArray] = field(default_factory=dict)
+    #: The models that made them, by configuration.
+    models: dict[str, ComposedModel] = field(default_factory=dict)
 
     def errors(self, groups: Sequence[Group]) -> tuple[FloatArray, FloatArray]:
         e_id = np.concatenate([g.ident.y - self.ident_pred[g.ident.run_id] for g in groups])
@@ -158,7 +161,7 @@ class Evaluation:
 
 
 def evaluate(models: dict[str, ComposedModel], groups: Sequence[Group]) -> Evaluation:
-    ev = Evaluation()
+    ev = Evaluation(models=dict(models))
     for g in groups:
         m = models[g.key]
         ev.ident_pred[g.ident.run_id] = m.predict(g.ident)
@@ -341,33 +344,49 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
     return out
 
 
+#: The held-out runs are judged as the end of the session recorded before them (runs joined
+#: by :func:`.runs.chain_records`) once that lowers the held-out RMSE by this fraction.
+SESSION_GAIN = 0.1
+
+
 def run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_name: str,
                  settings: WorkflowSettings | None = None,
-                 model_error: dict[str, FloatArray] | None = None) -> dict[str, Any]:
+                 model_error: dict[str, FloatArray] | None = None,
+                 session: Sequence[RunData] | None = None) -> dict[str, Any]:
     """The whole workflow (see :func:`_run_workflow`), BLAS pinned to one thread: the problems
     are thousands of tiny least-squares solves where threads only add contention."""
     with single_thread_blas(), memoised_fits():
         return _run_workflow(runs, base_factory, base_name=base_name, settings=settings,
-                             model_error=model_error)
+                             model_error=model_error, session=session)
 
 
 def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_name: str,
                   settings: WorkflowSettings | None = None,
-                  model_error: dict[str, FloatArray] | None = None) -> dict[str, Any]:
+                  model_error: dict[str, FloatArray] | None = None,
+                  session: Sequence[RunData] | None = None) -> dict[str, Any]:
     """The whole workflow; returns the report dict (plus ``_models``/``_evaluations`` for plots).
 
     ``model_error`` optionally maps identification run ids to a model-error signal (the UKF's
     f_h of seed 000); it is regressed on each winner's term as extra evidence.
+
+    ``session``: the same runs with each held-out run joined to the runs recorded before it.
+    Each round first asks whether the model as it stands predicts them
+    :data:`SESSION_GAIN` better so (only predictions change: the fits are on the
+    identification runs); from the round where it does, the held-out runs are judged that
+    way, and every earlier step is re-evaluated on them (report: ``runs_joined_in_round``).
+    A plain base may miss it while an effect it lacks (a speed term at a run's first sample)
+    hides the state the earlier runs left.
     """
     st = settings or WorkflowSettings()
     groups = group_runs(runs)
+    joined_in: int | None = None
     for name in st.candidates:
         if name not in CANDIDATES:
             raise HysteresisError(f"unknown candidate {name!r}; known: {', '.join(EFFECT_NAMES)}")
     terms: dict[str, list[Term]] = {g.key: [] for g in groups}
     models = fit_models(base_factory, groups, terms)
     current = evaluate(models, groups)
-    all_runs = [r for g in groups for r in (g.ident, *g.heldout)]
+    all_runs = _runs_of(groups)
     reach = reach_check(base_factory, groups[0].ident, st.candidates)
     within = sorted(k for k, v in reach.items() if v < 0.3)
     effects: list[dict[str, Any]] = []
@@ -383,6 +402,10 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     # The last round's scores, while they were made against the model as it stands.
     final_scores: dict[str, dict[str, Any]] = {}
     for round_ in range(st.max_effects + 1):
+        if session is not None and joined_in is None and (
+                switched := _joined_session(session, evaluations, groups)) is not None:
+            groups, evaluations, joined_in = switched[0], switched[1], round_
+            all_runs, current = _runs_of(groups), evaluations[-1]
         preds = [current.ident_pred.get(r.run_id, current.held_pred.get(r.run_id))
                  for r in all_runs]
         loc = locate(all_runs, [p for p in preds if p is not None])
@@ -400,18 +423,9 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         rankings.append([_public(s) for s in scores])
         screens.append(_screen(groups, current, remaining))
         final_scores = {s["name"]: s for s in scores}
-        # A change the load cells show is measured, not inferred from the output:
-        # an acceptable candidate with that corroboration goes ahead of the others.
-        winner = next((s for s in scores if st.physical_evidence and _accept(s, st)
-                       and s["load_cell_evidence"]["corroborated"]), None)
-        winner = winner or next((s for s in scores if _accept(s, st)), None)
-        added = [winner] if winner is not None else []
-        # Pairs only while what is left would not be called clean: a residual within the
-        # clean band has nothing for two more terms to explain, and the pair search is the
-        # workflow's most expensive step.
-        if (not added and st.pair_search and st.max_effects - len(effects) >= 2
-                and loc["rmse_over_noise"] > st.clean_factor):
-            added = _best_pair(scores, base_factory, groups, current, n_eff, load_cells, st)
+        added = _winners(scores, st, len(effects), loc["rmse_over_noise"],
+                         partial(_best_pair, scores, base_factory, groups, current, n_eff,
+                                 load_cells, st))
         if not added:
             break
         for k, chosen in enumerate(added):
@@ -434,7 +448,44 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         "reach_remaining_fraction": reach,
         "candidates_skipped": {n: "needs a channel the runs do not carry (tension)"
                                for n in skipped},
-        "candidates_failed": failed, "rankings": rankings, "library_screen": screens})
+        "candidates_failed": failed, "rankings": rankings, "library_screen": screens,
+        "runs_joined_in_round": joined_in})
+
+
+def _winners(scores: list[dict[str, Any]], st: WorkflowSettings, n_effects: int,
+             over_noise: float, pairs: Callable[[], list[dict[str, Any]]]
+             ) -> list[dict[str, Any]]:
+    """This round's additions: the best acceptable candidate, or a pair (``pairs``)."""
+    # A change the load cells show is measured, not inferred from the output:
+    # an acceptable candidate with that corroboration goes ahead of the others.
+    winner = next((s for s in scores if st.physical_evidence and _accept(s, st)
+                   and s["load_cell_evidence"]["corroborated"]), None)
+    winner = winner or next((s for s in scores if _accept(s, st)), None)
+    if winner is not None:
+        return [winner]
+    # Pairs only while what is left would not be called clean: a residual within the
+    # clean band has nothing for two more terms to explain, and the pair search is the
+    # workflow's most expensive step.
+    if (st.pair_search and st.max_effects - n_effects >= 2 and over_noise > st.clean_factor):
+        return pairs()
+    return []
+
+
+def _runs_of(groups: Sequence[Group]) -> list[RunData]:
+    return [r for g in groups for r in (g.ident, *g.heldout)]
+
+
+def _joined_session(session: Sequence[RunData], evaluations: Sequence[Evaluation],
+                    groups: Sequence[Group]) -> tuple[list[Group], list[Evaluation]] | None:
+    """The session's groups and every step re-evaluated on them, when the model as it stands
+    (the last evaluation's) predicts the joined held-out runs :data:`SESSION_GAIN` better than
+    it does the separate ones; else None."""
+    joined = group_runs(session)
+    now = evaluations[-1]
+    ev = evaluate(now.models, joined)
+    if _rmse(ev.errors(joined)[1]) > (1.0 - SESSION_GAIN) * _rmse(now.errors(groups)[1]):
+        return None
+    return joined, [evaluate(e.models, joined) for e in evaluations[:-1]] + [ev]
 
 
 def _score_all(remaining: Sequence[str], base_factory: BaseFactory, groups: Sequence[Group],
@@ -490,6 +541,7 @@ def _assemble(groups: Sequence[Group], evaluations: list[Evaluation],
         "candidates_failed": parts["candidates_failed"],
         "rankings": parts["rankings"],
         "library_screen": parts["library_screen"],
+        "runs_joined_in_round": parts["runs_joined_in_round"],
         "summary": {
             "configurations": [g.key for g in groups],
             "identification_runs": [g.ident.run_id for g in groups],
