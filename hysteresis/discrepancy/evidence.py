@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from hysteresis.discrepancy._ops import play
 from hysteresis.discrepancy.backlash import MIN_DEAD_TRAVEL_FRACTION, dead_travel
 from hysteresis.discrepancy.friction import (
     MIN_DIRECTION_RATIO,
@@ -71,3 +72,44 @@ def corroboration(name: str, idents: Sequence[RunData]) -> dict[str, Any]:
         ok = (all(abs(x) >= np.log(MIN_DIRECTION_RATIO) for x in logs)
               and len({np.sign(x) for x in logs}) == 1)  # one sheath: the same side everywhere
     return {"claim": claim, "per_configuration": per, "corroborated": bool(ok)}
+
+
+#: The input tension "follows the speed" when speed terms explain at least this share of what a
+#: rate-independent map of the input leaves of it.
+SPEED_SHARE = 0.8
+
+
+def tension_speed_share(idents: Sequence[RunData], *, n_plays: int = 7) -> float | None:
+    """How much of the input tension the input speed explains beyond a rate-independent map.
+
+    On the identification runs the tension is regressed on a rate-independent basis (plays of
+    the input with thresholds up to half its span, the input, a constant) and again with speed
+    terms added (``v``, ``sign(v) |v|^0.5``, ``|v|``, scaled by the 99th-percentile speed);
+    returns the share of the first fit's residual variance the speed terms remove (partial
+    R^2), or None without an input tension. A capstan tension set by the friction state alone
+    leaves little to the speed; a tension that also carries a viscous or relaxing force (a
+    rate effect pulling on the tendon) leaves most of it."""
+    rows_plain, rows_speed, target = [], [], []
+    for run in idents:
+        if run.tension is None:
+            return None
+        span = float(np.ptp(run.u))
+        radii = np.linspace(0.0, 0.5 * span, n_plays + 1)[1:]
+        plain = np.column_stack([*(play(run.u, float(r)) for r in radii), run.u,
+                                 np.ones(run.n)])
+        v = run.v / max(float(np.percentile(np.abs(run.v), 99)), 1e-12)
+        rows_plain.append(plain)
+        rows_speed.append(np.column_stack([plain, v, np.sign(v) * np.sqrt(np.abs(v)),
+                                           np.abs(v)]))
+        target.append(run.tension)
+    t = np.concatenate(target)
+
+    def residual(a: list[np.ndarray]) -> float:
+        x = np.vstack(a)
+        coef, *_ = np.linalg.lstsq(x, t, rcond=None)
+        return float(np.sum((t - x @ coef) ** 2))
+
+    plain_ss = residual(rows_plain)
+    if plain_ss <= 0.0:
+        return 0.0
+    return float(1.0 - residual(rows_speed) / plain_ss)

@@ -67,3 +67,33 @@ def statement(effect: Mapping[str, Any], channels: set[str] | frozenset[str]
            "that would tell them apart")
     return {"class": names, "label": label, "named": effect["name"], "form": effect.get("form"),
             "statement": f"{label}: {why}"}
+
+
+def force_statement(effect: Mapping[str, Any], speed_share: float | None, *,
+                    min_gain: float, max_delta_bic: float) -> dict[str, Any] | None:
+    """A stretch named on a tension that carries a speed-dependent force.
+
+    ``tendon_elongation`` reads the input tension. When that tension follows the input speed
+    (``speed_share``: :func:`.evidence.tension_speed_share` at least
+    :data:`.evidence.SPEED_SHARE`) and ``rate_dependence`` alone also clears the bar (the
+    round's runner-up, by ``min_gain`` and ``max_delta_bic``), the shortfall the stretch
+    explains may be a rate-dependent force reaching the output through the tendon's
+    compliance: the tension shows the force, not its cause. Returns the class, or None."""
+    from hysteresis.discrepancy.evidence import SPEED_SHARE
+
+    if effect.get("name") != "tendon_elongation" or speed_share is None \
+            or speed_share < SPEED_SHARE:
+        return None
+    rival = (effect.get("evidence") or {}).get("runner_up") or {}
+    if rival.get("name") != "rate_dependence" or rival["relative_gain"] < min_gain \
+            or rival["delta_bic"] > max_delta_bic:
+        return None
+    label = "rate_dependence or tendon_elongation"
+    return {"class": ["rate_dependence", "tendon_elongation"], "label": label,
+            "named": effect["name"], "form": effect.get("form"),
+            "statement": (
+                f"{label}: the input speed explains {100 * speed_share:.0f} % of the input "
+                "tension that a rate-independent map leaves, so the stretch that reads it may "
+                "be how a rate-dependent force reaches the output (rate_dependence alone "
+                f"removes {100 * rival['relative_gain']:.0f} % of the held-out error); not "
+                "separable on these runs")}

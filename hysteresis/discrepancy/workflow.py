@@ -42,8 +42,8 @@ from hysteresis.discrepancy.effects import (
     fit_with_effect,
     memoised_fits,
 )
-from hysteresis.discrepancy.evidence import corroboration
-from hysteresis.discrepancy.identifiability import statement
+from hysteresis.discrepancy.evidence import corroboration, tension_speed_share
+from hysteresis.discrepancy.identifiability import force_statement, statement
 from hysteresis.discrepancy.library import screen
 from hysteresis.discrepancy.locate import autocorrelation, locate
 from hysteresis.discrepancy.parallel import map_ordered
@@ -529,7 +529,7 @@ def _assemble(groups: Sequence[Group], evaluations: list[Evaluation],
         "base_family": base_name,
         "verdict": _verdict(effects, residual, st.clean_factor),
         # the first effect's class when the channels present cannot tell it from another
-        "identifiability": statement(effects[0], channels) if effects else None,
+        "identifiability": _identifiability(effects, channels, groups, st),
         "residual": residual,
         "effects": effects,
         "located": parts["located"],
@@ -555,6 +555,19 @@ def _assemble(groups: Sequence[Group], evaluations: list[Evaluation],
     report["_evaluations"] = evaluations
     report["_groups"] = groups
     return report
+
+
+def _identifiability(effects: list[dict[str, Any]], channels: set[str],
+                     groups: Sequence[Group], st: WorkflowSettings) -> dict[str, Any] | None:
+    """The first effect's class: a pair the channels cannot tell apart, or a stretch that reads
+    a tension carrying a speed-dependent force."""
+    if not effects:
+        return None
+    fixed = statement(effects[0], channels)
+    if fixed is not None or effects[0]["name"] != "tendon_elongation":
+        return fixed
+    return force_statement(effects[0], tension_speed_share([g.ident for g in groups]),
+                           min_gain=st.min_relative_gain, max_delta_bic=st.max_delta_bic)
 
 
 def _effect_entry(chosen: dict[str, Any], added: Sequence[dict[str, Any]], k: int,
