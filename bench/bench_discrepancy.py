@@ -36,6 +36,14 @@ def _time(fn: Any, repeat: int = 2) -> tuple[float, Any]:
     return best, out
 
 
+def _runner_up(rep: dict[str, Any]) -> list[Any] | None:
+    """The first effect's runner-up in its round: [name, held-out gain alone]."""
+    if not rep["effects"]:
+        return None
+    ru = rep["effects"][0]["evidence"].get("runner_up")
+    return None if ru is None else [ru["name"], round(float(ru["relative_gain"]), 3)]
+
+
 def _cpu() -> float:
     """CPU seconds of this process and of its reaped children (the forked workers)."""
     t = os.times()
@@ -177,6 +185,7 @@ def injector_sources(cases: dict[str, tuple[dict[str, float], str, str | None]] 
                 "heldout_reduction_vs_best_plain": round(float(
                     rep["summary"]["heldout_reduction_vs_best_plain"]), 3),
                 "rmse_over_noise": round(float(rep["residual"]["rmse_over_noise"]), 2),
+                "runner_up": _runner_up(rep),
                 **score_answer(rep, hidden, ident)}
             # one line a source as it finishes (the matrix takes hours on 2 shared cores)
             print(json.dumps({f"{plant}:{case}": out[f"{plant}:{case}"]}), file=sys.stderr,
@@ -233,7 +242,8 @@ def score_answer(report: dict[str, Any], hidden: tuple[str, str] | None,
 def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None = None,
                      strengths: tuple[str, ...] = ("weak", "strong"),
                      forms: list[tuple[str, str]] | None = None,
-                     bases: tuple[str, ...] = (), workers: int = 0) -> dict[str, Any]:
+                     bases: tuple[str, ...] = (), workers: int = 0,
+                     history: str = "auto") -> dict[str, Any]:
     """What ``make discrepancy`` answers (default settings) on the clean-room effect matrix
     (``tests/cleanroom/effects.py``: four plants, every form at each strength, clean sources
     at rest and loaded, ragged load-cell streams; ``tsm-rig-log/1`` run folders ingested as
@@ -278,7 +288,7 @@ def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None 
             t0, c0 = time.perf_counter(), _cpu()
             rep, _ = analyse(runs, auto_families=families, max_bases=int(cfg["max_bases"]),
                              base_retry_factor=float(cfg["base_retry_factor"]),
-                             settings=WorkflowSettings(workers=workers))
+                             settings=WorkflowSettings(workers=workers), history=history)
             seconds, cpu = time.perf_counter() - t0, _cpu() - c0
             eff = truth["effect"]
             hidden = CLEANROOM_NAMES[(eff, truth["form"])] if eff else None
@@ -296,6 +306,7 @@ def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None 
                        rep["summary"]["heldout_reduction_vs_best_plain"]), 3),
                    "rmse_over_noise": round(float(rep["residual"]["rmse_over_noise"]), 2),
                    "chained": (rep.get("run_history") or {}).get("chained"),
+                   "runner_up": _runner_up(rep),
                    **score_answer(rep, hidden, identifiable)}
             for base in bases:
                 params = {k: v for k, v in families[base].items() if k != "family"}
@@ -483,6 +494,9 @@ if __name__ == "__main__":
                              "the clean sources are always run)")
     parser.add_argument("--with-bases", action="store_true",
                         help="with --cleanroom: also each auto family given as the base")
+    parser.add_argument("--history", default="auto", choices=("auto", "separate", "chained"),
+                        help="with --cleanroom: the stage's history setting (held-out runs "
+                             "judged after the runs recorded before them or each alone)")
     parser.add_argument("--workers", type=int, default=0,
                         help="with --cleanroom or --injector: processes scoring each source's "
                              "candidates (the stage's workers; default 0: one per core); the "
@@ -505,7 +519,8 @@ if __name__ == "__main__":
         res = cleanroom_matrix(
             plants=tuple(p for p in args.plants.split(",") if p) or None,
             strengths=("strong",) if args.strong_only else ("weak", "strong"),
-            bases=BASES if args.with_bases else (), workers=args.workers)
+            bases=BASES if args.with_bases else (), workers=args.workers,
+            history=args.history)
         print(json.dumps(res["_summary"], indent=1))
     else:
         print(json.dumps(run(), indent=1))

@@ -14,7 +14,7 @@ from hysteresis.base import HysteresisError
 from hysteresis.discrepancy.base_check import Workflow, base_misfit, second_opinion
 from hysteresis.discrepancy.errors import DiscrepancyError
 from hysteresis.discrepancy.headline import headline
-from hysteresis.discrepancy.ranking import Spec, pick_base, plain_scores, rank_bases
+from hysteresis.discrepancy.ranking import pick_base, rank_bases
 from hysteresis.discrepancy.runs import RunData, chain_records, check_one_rig
 from hysteresis.discrepancy.workflow import (
     SESSION_GAIN,
@@ -57,24 +57,21 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
 
     ``history`` (:func:`run_history`): ``separate`` judges every held-out run from the start
     the base takes from the record; ``chained`` from the state the runs recorded before it
-    left (:func:`.runs.chain_records`); ``auto`` chains when that makes the plain base (the
-    best of ``auto_families``, or the given one) predict the held-out runs
-    :data:`CHAIN_GAIN` better."""
+    left (:func:`.runs.chain_records`); ``auto`` lets each base's workflow join them in the
+    first round where that predicts them :data:`.workflow.SESSION_GAIN` better."""
     st = settings or WorkflowSettings()
     try:
         check_one_rig(runs)
     except HysteresisError as err:
         raise DiscrepancyError(str(err)) from None
-    families = (auto_families if base_family == "auto" else
-                {base_family: {**(base_params or {}), "family": base_family}})
-    runs, session, history_report, ranked = run_history(runs, history, families)
+    runs, session, history_report = run_history(runs, history)
     workflow = _workflow_on(runs, st, _model_error(runs) if ukf_evidence else None, session)
     auto_scores: dict[str, float] = {}
     tried: list[dict[str, Any]] = []
     if base_family == "auto":
         full, params, auto_scores, tried = _auto_base(
             workflow, runs, auto_families, max_bases=max_bases,
-            retry_factor=base_retry_factor, min_gain=st.min_relative_gain, ranked=ranked)
+            retry_factor=base_retry_factor, min_gain=st.min_relative_gain)
     else:
         params = dict(base_params or {})
         full = workflow(base_family, params)
@@ -95,64 +92,50 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
 HISTORY_MODES = ("auto", "separate", "chained")
 
 
-def run_history(runs: list[RunData], mode: str, families: Mapping[str, Mapping[str, Any]]
-                ) -> tuple[list[RunData], list[RunData] | None, dict[str, Any] | None,
-                           tuple[dict[str, float], dict[str, Spec]] | None]:
+def run_history(runs: list[RunData], mode: str
+                ) -> tuple[list[RunData], list[RunData] | None, dict[str, Any] | None]:
     """Whether each held-out run is judged from the state the runs recorded before it left.
 
-    ``auto`` joins them now when the best plain family then predicts the held-out runs
-    :data:`.workflow.SESSION_GAIN` better, else hands the joined runs to the workflow, which
-    asks again once each effect is in. Returns the runs to analyse, the joined runs for the
-    workflow (or None), the report's ``run_history`` (None when no held-out run was recorded
-    after another of its configuration) and, when ``families`` were ranked plain on the runs
-    returned, that ranking (scores, specs) for the automatic base to reuse."""
+    ``chained``/``separate`` decide now; ``auto`` hands the joined runs to the workflow, which
+    joins them in the first round where the model as it stands (the plain base, then with each
+    effect found) predicts them :data:`.workflow.SESSION_GAIN` better. Returns the runs to
+    analyse, the joined runs for the workflow (or None) and the report's ``run_history``
+    (None when no held-out run was recorded after another of its configuration)."""
     if mode not in HISTORY_MODES:
         raise DiscrepancyError(f"history={mode!r}: must be one of {', '.join(HISTORY_MODES)}")
     chained, before = chain_records(runs)
     if not before:
-        return runs, None, None, None
-    if mode != "auto":
-        use = mode == "chained"
-        return (chained if use else runs), None, {
-            "mode": mode, "chained": use, "recorded_before": before}, None
-    (sep, cha), specs = plain_scores([runs, chained], families)
-    if not sep:
-        raise DiscrepancyError("no base family could be fitted to this source")
-    best_sep, best_cha = min(sep.values()), min(cha.values())
-    use = best_cha <= (1.0 - SESSION_GAIN) * best_sep
-    report = {"mode": "auto", "chained": use, "recorded_before": before,
-              "plain_heldout_rmse": {"separate": best_sep, "chained": best_cha},
-              "joined_in_round": 0 if use else None}
-    if use:
-        return chained, None, report, (cha, specs)
-    return runs, chained, report, (sep, specs)
+        return runs, None, None
+    report = {"mode": mode, "recorded_before": before}
+    if mode == "auto":
+        return runs, chained, report
+    return (chained if mode == "chained" else runs), None, report
 
 
 def _history_outcome(hist: dict[str, Any] | None, report: dict[str, Any]
                      ) -> dict[str, Any] | None:
-    """``run_history`` with the workflow's decision (``runs_joined_in_round``) and a note."""
+    """``run_history`` with the kept base's decision (its workflow's ``runs_joined``)."""
     if hist is None:
         return None
     hist = dict(hist)
-    later = report.get("runs_joined_in_round")
-    if hist["mode"] == "auto" and not hist["chained"] and later is not None:
-        hist["chained"], hist["joined_in_round"] = True, later
-    plain = hist.get("plain_heldout_rmse") or {}
+    checks = report.get("runs_joined") or []
+    joined = next((c for c in checks if c["joined"]), None)
+    hist["checks"] = checks
     if hist["mode"] != "auto":
+        hist["chained"] = hist["mode"] == "chained"
         hist["note"] = (f"history={hist['mode']}: held-out runs judged "
                         + ("from the state the runs recorded before them left"
                            if hist["chained"] else "each from its own start"))
-    elif hist["chained"] and hist["joined_in_round"] == 0:
-        hist["note"] = ("held-out runs judged from the state the runs recorded before them "
-                        f"left: the best plain family predicts them to "
-                        f"{plain['chained']:.4g} instead of {plain['separate']:.4g}")
-    elif hist["chained"]:
-        hist["note"] = ("held-out runs judged from the state the runs recorded before them "
-                        f"left from round {hist['joined_in_round']} on, once the effects "
-                        "before it were in (plain, the state was hidden by them)")
+    elif joined is not None:
+        hist["chained"], hist["joined_in_round"] = True, joined["round"]
+        hist["note"] = (
+            "held-out runs judged from the state the runs recorded before them left, from "
+            f"round {joined['round']} on (held-out RMSE {joined['heldout_rmse_separate']:.4g} "
+            f"each from its own start, {joined['heldout_rmse_joined']:.4g} so)")
     else:
+        hist["chained"], hist["joined_in_round"] = False, None
         hist["note"] = ("held-out runs judged each from its own start: joined to the runs "
-                        "recorded before them, no model predicted them "
+                        "recorded before them, no model of the workflow predicted them "
                         f"{100 * SESSION_GAIN:.0f} % better")
     log.info(hist["note"])
     return hist
@@ -176,18 +159,13 @@ def _workflow_on(runs: list[RunData], st: WorkflowSettings,
 
 def _auto_base(workflow: Workflow, runs: list[RunData],
                families: Mapping[str, Mapping[str, Any]], *, max_bases: int,
-               retry_factor: float, min_gain: float,
-               ranked: tuple[dict[str, float], dict[str, Spec]] | None = None
+               retry_factor: float, min_gain: float
                ) -> tuple[dict[str, Any], dict[str, Any], dict[str, float],
                           list[dict[str, Any]]]:
     """``base_family=auto``: the workflow on the best plain families in turn, while the answer
     is neither clean nor explained to ``retry_factor`` x the noise floor; returns (the kept
-    base's full result, its parameters, the plain scores, what each base tried answered).
-    ``ranked``: the plain ranking on these runs, when already made."""
-    if ranked is None:
-        _, _, scores, specs = rank_bases(runs, families)
-    else:
-        scores, specs = ranked
+    base's full result, its parameters, the plain scores, what each base tried answered)."""
+    _, _, scores, specs = rank_bases(runs, families)
     results: list[tuple[str, dict[str, Any]]] = []
     tried: list[dict[str, Any]] = []
     for label in sorted(scores, key=scores.__getitem__)[:max(1, max_bases)]:

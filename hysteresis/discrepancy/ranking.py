@@ -26,38 +26,27 @@ def rank_bases(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
                ) -> tuple[str, dict[str, Any], dict[str, float], dict[str, Spec]]:
     """Every family of ``families`` scored by its plain held-out RMSE: (best family, its
     parameters, scores by label, (family, parameters) by label)."""
-    (scores,), specs = plain_scores([runs], families)
-    if not scores:
-        raise DiscrepancyError("no base family could be fitted to this source")
-    best = min(scores, key=scores.__getitem__)
-    return specs[best][0], specs[best][1], scores, specs
-
-
-def plain_scores(variants: Sequence[list[RunData]], families: Mapping[str, Mapping[str, Any]]
-                 ) -> tuple[list[dict[str, float]], dict[str, Spec]]:
-    """Each family's plain held-out RMSE on each variant of the runs (variants differ in
-    their held-out runs only: one fit per family and configuration serves them all)."""
-    groups_by = [group_runs(v) for v in variants]
-    scores: list[dict[str, float]] = [{} for _ in variants]
+    groups = group_runs(runs)
+    scores: dict[str, float] = {}
     specs: dict[str, Spec] = {}
     for label, spec in families.items():
         params = dict(spec or {})
         name = str(params.pop("family", label))
         try:
             factory = base_factory_for(name, **params)
-            models = {g.key: ComposedModel(factory).fit(g.ident) for g in groups_by[0]}
-            found = []
-            for groups in groups_by:
-                _, e_h = evaluate(models, groups).errors(groups)
-                found.append(float(np.sqrt(np.mean(e_h**2))))
+            models = {g.key: ComposedModel(factory).fit(g.ident) for g in groups}
+            _, e_h = evaluate(models, groups).errors(groups)
+            score = float(np.sqrt(np.mean(e_h**2)))
         except Exception as err:  # a family that cannot fit this data is simply not chosen
             log.warning("base family %s skipped: %s", label, err)
             continue
-        if all(math.isfinite(f) for f in found):
-            for i, f in enumerate(found):
-                scores[i][label] = f
+        if math.isfinite(score):
+            scores[label] = score
             specs[label] = (name, params)
-    return scores, specs
+    if not scores:
+        raise DiscrepancyError("no base family could be fitted to this source")
+    best = min(scores, key=scores.__getitem__)
+    return specs[best][0], specs[best][1], scores, specs
 
 
 def choose_base(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]

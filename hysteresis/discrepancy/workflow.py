@@ -373,13 +373,14 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     Each round first asks whether the model as it stands predicts them
     :data:`SESSION_GAIN` better so (only predictions change: the fits are on the
     identification runs); from the round where it does, the held-out runs are judged that
-    way, and every earlier step is re-evaluated on them (report: ``runs_joined_in_round``).
+    way, and every earlier step is re-evaluated on them (report: ``runs_joined``, each
+    round's comparison until then).
     A plain base may miss it while an effect it lacks (a speed term at a run's first sample)
     hides the state the earlier runs left.
     """
     st = settings or WorkflowSettings()
     groups = group_runs(runs)
-    joined_in: int | None = None
+    joins: list[dict[str, Any]] = []  # each round's comparison, until the runs are joined
     for name in st.candidates:
         if name not in CANDIDATES:
             raise HysteresisError(f"unknown candidate {name!r}; known: {', '.join(EFFECT_NAMES)}")
@@ -402,9 +403,9 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     # The last round's scores, while they were made against the model as it stands.
     final_scores: dict[str, dict[str, Any]] = {}
     for round_ in range(st.max_effects + 1):
-        if session is not None and joined_in is None and (
-                switched := _joined_session(session, evaluations, groups)) is not None:
-            groups, evaluations, joined_in = switched[0], switched[1], round_
+        if session is not None and not any(j["joined"] for j in joins) and (
+                switched := _joined_session(session, evaluations, groups, round_, joins)):
+            groups, evaluations = switched
             all_runs, current = _runs_of(groups), evaluations[-1]
         preds = [current.ident_pred.get(r.run_id, current.held_pred.get(r.run_id))
                  for r in all_runs]
@@ -449,7 +450,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         "candidates_skipped": {n: "needs a channel the runs do not carry (tension)"
                                for n in skipped},
         "candidates_failed": failed, "rankings": rankings, "library_screen": screens,
-        "runs_joined_in_round": joined_in})
+        "runs_joined": joins})
 
 
 def _winners(scores: list[dict[str, Any]], st: WorkflowSettings, n_effects: int,
@@ -476,14 +477,19 @@ def _runs_of(groups: Sequence[Group]) -> list[RunData]:
 
 
 def _joined_session(session: Sequence[RunData], evaluations: Sequence[Evaluation],
-                    groups: Sequence[Group]) -> tuple[list[Group], list[Evaluation]] | None:
+                    groups: Sequence[Group], round_: int, joins: list[dict[str, Any]]
+                    ) -> tuple[list[Group], list[Evaluation]] | None:
     """The session's groups and every step re-evaluated on them, when the model as it stands
     (the last evaluation's) predicts the joined held-out runs :data:`SESSION_GAIN` better than
-    it does the separate ones; else None."""
+    it does the separate ones; else None. The comparison is appended to ``joins``."""
     joined = group_runs(session)
     now = evaluations[-1]
     ev = evaluate(now.models, joined)
-    if _rmse(ev.errors(joined)[1]) > (1.0 - SESSION_GAIN) * _rmse(now.errors(groups)[1]):
+    apart, together = _rmse(now.errors(groups)[1]), _rmse(ev.errors(joined)[1])
+    ok = together <= (1.0 - SESSION_GAIN) * apart
+    joins.append({"round": round_, "heldout_rmse_separate": apart,
+                  "heldout_rmse_joined": together, "joined": ok})
+    if not ok:
         return None
     return joined, [evaluate(e.models, joined) for e in evaluations[:-1]] + [ev]
 
@@ -541,7 +547,7 @@ def _assemble(groups: Sequence[Group], evaluations: list[Evaluation],
         "candidates_failed": parts["candidates_failed"],
         "rankings": parts["rankings"],
         "library_screen": parts["library_screen"],
-        "runs_joined_in_round": parts["runs_joined_in_round"],
+        "runs_joined": parts["runs_joined"],
         "summary": {
             "configurations": [g.key for g in groups],
             "identification_runs": [g.ident.run_id for g in groups],

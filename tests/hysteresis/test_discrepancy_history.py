@@ -56,16 +56,14 @@ def test_the_prediction_of_a_joined_run_is_the_change_from_its_first_sample() ->
 
 def test_history_modes() -> None:
     runs = [_run("a", "identification", 0.0), _run("b", "heldout", 100.0)]
-    fams = {"linear": {}}
-    kept, session, rep, _ = run_history(runs, "separate", fams)
-    assert kept is runs and session is None and rep is not None and rep["chained"] is False
-    kept, session, rep, _ = run_history(runs, "chained", fams)
-    assert rep is not None and rep["chained"] is True and kept[1].whole is not None
-    # the static line predicts both ways alike: the workflow is handed the session to ask again
-    kept, session, rep, _ = run_history(runs, "auto", fams)
-    assert kept is runs and rep is not None and rep["chained"] is False
-    assert session is not None and session[1].whole is not None
+    kept, session, rep = run_history(runs, "separate")
+    assert kept is runs and session is None and rep is not None and rep["mode"] == "separate"
+    kept, session, rep = run_history(runs, "chained")
+    assert session is None and kept[1].whole is not None
+    # auto: the workflow is handed the joined runs and decides round by round
+    kept, session, rep = run_history(runs, "auto")
+    assert kept is runs and session is not None and session[1].whole is not None
     untimed = [replace(r, started_at=None) for r in runs]
-    assert run_history(untimed, "auto", fams)[2] is None  # nothing to decide
+    assert run_history(untimed, "auto") == (untimed, None, None)  # nothing to decide
     with pytest.raises(DiscrepancyError, match="history='later'"):
-        run_history(runs, "later", fams)
+        run_history(runs, "later")

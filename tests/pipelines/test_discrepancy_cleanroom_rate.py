@@ -58,8 +58,9 @@ def test_runs_recorded_one_after_another_are_judged_from_the_state_they_were_lef
     out, _ = analyse(runs, base_family="gamma", base_params=BASE, auto_families={},
                      base_check=False, settings=WorkflowSettings(max_effects=1))
     hist = out["run_history"]
-    assert hist["chained"] is True
-    assert hist["plain_heldout_rmse"]["chained"] < 0.2 * hist["plain_heldout_rmse"]["separate"]
+    assert hist["chained"] is True and hist["joined_in_round"] == 0
+    (check,) = hist["checks"]
+    assert check["heldout_rmse_joined"] < 0.2 * check["heldout_rmse_separate"]
     assert sorted(len(v) for v in hist["recorded_before"].values()) == [1, 2]
     assert out["verdict"] == "no_missing_effect"
     assert out["residual"]["rmse_over_noise"] < 3.0
