@@ -184,8 +184,8 @@ class IdentificationConfig(TrackedStageConfig):
     #: may start where they left the mechanism, and a relative encoder zeroes the output
     #: there: ``chained`` judges it from the state the earlier runs' input left (its output
     #: moved to its own zero), ``separate`` from the start the base takes from the record,
-    #: ``auto`` chains when the best plain family then predicts the held-out runs 10 % better
-    #: (report: run_history).
+    #: ``auto`` joins them from the first round where the model as it stands predicts them
+    #: 10 % better (report: run_history).
     history: str = "auto"
     signals: Signals = field(default_factory=Signals)
     #: Progress bars (tqdm, on stderr) while models are fitted or scored; false = none (fit then
@@ -348,8 +348,8 @@ class DiscrepancyConfig:
     #: may start where they left the mechanism, and a relative encoder zeroes the output
     #: there: ``chained`` judges it from the state the earlier runs' input left (its output
     #: moved to its own zero), ``separate`` from the start the base takes from the record,
-    #: ``auto`` chains when the best plain family then predicts the held-out runs 10 % better
-    #: (report: run_history).
+    #: ``auto`` joins them from the first round where the model as it stands predicts them
+    #: 10 % better (report: run_history).
     history: str = "auto"
     signals: Signals = field(default_factory=Signals)
     #: Analyse at this rate (moving-average decimation; null = the dataset's own rate).
