@@ -288,20 +288,24 @@ def split_single_runs(runs: Sequence[RunData], *, heldout_fraction: float = 0.3
     return out, notes
 
 
-def concat_runs(runs: list[RunData], *, run_id: str | None = None) -> RunData:
-    """Several records of one configuration as one run (time made continuous; each record's
-    time since start kept through ``starts``). Models see one long input sequence."""
+def concat_runs(runs: list[RunData], *, run_id: str | None = None,
+                session: bool = False) -> RunData:
+    """Several records of one configuration as one run (time made continuous). Models see one
+    long input sequence: each record from its own start (its time since start kept through
+    ``starts``), or with ``session`` as one record, each run's input moved to start where the
+    last one stopped (the mechanism held between the runs)."""
     if not runs:
         raise HysteresisError("concat_runs needs at least one run")
-    if len(runs) == 1:
+    if len(runs) == 1 and not session:
         return runs[0]
-    ts, us, ys, t1, t2, starts = [], [], [], [], [], []
+    ts, ys, t1, t2, starts = [], [], [], [], []
+    us: list[FloatArray] = []
     offset, n = 0.0, 0
     for r in runs:
         starts.append(n)
         ts.append(r.t - r.t[0] + offset)
         offset = float(ts[-1][-1]) + r.dt
-        us.append(r.u)
+        us.append(r.u + (float(us[-1][-1]) - float(r.u[0]) if session and us else 0.0))
         ys.append(r.y)
         t1.append(r.tension)
         t2.append(r.tension_out)
@@ -311,8 +315,10 @@ def concat_runs(runs: list[RunData], *, run_id: str | None = None) -> RunData:
         run_id=run_id or "+".join(r.run_id for r in runs), t=cat(ts), u=cat(us), y=cat(ys),
         tension=None if any(x is None for x in t1) else cat([x for x in t1 if x is not None]),
         tension_out=None if any(x is None for x in t2) else cat([x for x in t2 if x is not None]),
-        config=dict(runs[0].config), excitation="+".join(r.excitation for r in runs),
-        role=runs[0].role, starts=tuple(starts),
+        config=dict(runs[-1 if session else 0].config),
+        excitation=runs[-1].excitation if session else "+".join(r.excitation for r in runs),
+        role=runs[-1 if session else 0].role, starts=(0,) if session else tuple(starts),
+        record_start_s=0.0 if session else None,
     )
 
 
@@ -344,7 +350,7 @@ def chain_records(runs: Sequence[RunData]) -> tuple[list[RunData], dict[str, lis
             if any((getattr(p, c) is None) != (getattr(run, c) is None)
                    for p in session for c in ("tension", "tension_out")):
                 continue
-            whole = _joined(session, run.run_id)
+            whole = concat_runs(session, run_id=f"{run.run_id}:session", session=True)
             n0 = whole.n - run.n
             chained[run.run_id] = RunData(
                 run_id=run.run_id, t=run.t, u=run.u, y=run.y, tension=run.tension,
@@ -354,28 +360,3 @@ def chain_records(runs: Sequence[RunData]) -> tuple[list[RunData], dict[str, lis
             before[run.run_id] = [p.run_id for p in session[:-1]]
     return [chained.get(r.run_id, r) for r in runs], before
 
-
-def _joined(session: Sequence[RunData], run_id: str) -> RunData:
-    """The session's runs end to end: each run's input moved so it starts where the last
-    stopped, its time so it follows on one sample later."""
-    ts, us, ys, t1, t2 = [], [], [], [], []
-    t_next, u_end = 0.0, 0.0
-    for k, r in enumerate(session):
-        shift = 0.0 if k == 0 else u_end - float(r.u[0])
-        ts.append(r.t - r.t[0] + t_next)
-        us.append(r.u + shift)
-        ys.append(r.y)
-        t1.append(r.tension)
-        t2.append(r.tension_out)
-        t_next = float(ts[-1][-1]) + r.dt
-        u_end = float(us[-1][-1])
-    last = session[-1]
-
-    def cat(xs: list[FloatArray | None]) -> FloatArray | None:
-        return None if any(x is None for x in xs) else np.concatenate(
-            [x for x in xs if x is not None])
-
-    return RunData(run_id=f"{run_id}:session", t=np.concatenate(ts), u=np.concatenate(us),
-                   y=np.concatenate(ys), tension=cat(t1), tension_out=cat(t2),
-                   config=dict(last.config), excitation=last.excitation, role=last.role,
-                   record_start_s=float(ts[0][0]))
