@@ -442,8 +442,10 @@ class Asymmetry(Effect):
         "the loop centre shifts by a constant from the first motion on, width about the same"
     )
     term = ("one-way backlash: c * m(t), m = 0 before the first motion, 1 after (a loop-centre "
-            "shift born at once); loading_gain: c1 (y_base - centre) s(t) + c2 s(t), the "
-            "branches steeper one way (s = +-1, the direction of motion); pull_push_gain: "
+            "shift born at once); loading_gain: c (y_base - pivot) s_w(t), the branches steeper "
+            "one way about a pivot (the recorded range's bottom, centre or top); s_w the "
+            "loading state, +-1, turning over along an input travel 2 w after a reversal (w "
+            "on a grid, refined; w = 0: the direction of motion); pull_push_gain: "
             "c (y_base - kink) on the pull side of a kink only, the kink at centre + k half "
             "(k on a grid, refined: the plant's rest, off the recorded range's centre when one "
             "side's gain differs)")
@@ -451,7 +453,20 @@ class Asymmetry(Effect):
     before_stop = True
     first_form = "one_way_backlash"
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
-        "loading_gain": ("output", 2, True), "pull_push_gain": ("output", 1, True)}
+        "loading_gain": ("output", 1, True), "pull_push_gain": ("output", 1, True)}
+    #: Input travel over which the loading/unloading state turns over after a reversal, as
+    #: fractions of the identification input's half-range (refined): 0 is the direction of
+    #: motion itself; a friction contact or a follower's slack turns over along a travel.
+    turn_widths: ClassVar[tuple[float, ...]] = (0.0, 0.03, 0.07, 0.15)
+
+    @staticmethod
+    def direction_state(run: RunData, width: float) -> FloatArray:
+        """Loading (+1) or unloading (-1) state, turning over linearly along an input travel
+        of ``2 width`` after each reversal (a play of half-width ``width`` on the input,
+        read as its normalised lag); ``width`` 0: the direction of motion."""
+        if width <= 0.0:
+            return run.s
+        return np.asarray((run.u - play(run.u, width)) / width, dtype=np.float64)
 
     def grid(self, ident: RunData) -> list[Any]:
         return [NO_THETA, *self.form_grid(ident)]
@@ -459,19 +474,22 @@ class Asymmetry(Effect):
     def form_grid(self, ident: RunData) -> list[Any]:
         # the pull/push kink sits at the plant's rest, which a side's gain moves off the
         # recorded range's centre (a push side at 0.75 moves it by 0.14 of the half-range)
-        return [("loading_gain", 0.0),
+        return [*[("loading_gain", k, w) for k in (-1.0, 0.0, 1.0) for w in self.turn_widths],
                 *[("pull_push_gain", k) for k in (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)]]
 
     def context(self, ident: RunData) -> Ctx:
         return {"centre": 0.5 * float(ident.y.max() + ident.y.min()),
-                "half": 0.5 * float(np.ptp(ident.y))}
+                "half": 0.5 * float(np.ptp(ident.y)),
+                "input_half": max(0.5 * float(np.ptp(ident.u)), 1e-12)}
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
         form = self.form(theta)
         if form == "loading_gain":
             # the branches' slopes differ by direction, and so does their offset: the
             # branches of a backlash whose two sides differ in slope
-            return np.column_stack([(y_base - ctx["centre"]) * run.s, run.s])
+            s = self.direction_state(run, float(theta[-1]) * ctx["input_half"])
+            pivot = ctx["centre"] + float(theta[1]) * ctx["half"]
+            return np.asarray(((y_base - pivot) * s)[:, None], dtype=np.float64)
         if form == "pull_push_gain":
             kink = ctx["centre"] + float(theta[-1]) * ctx.get("half", 0.0)
             return np.asarray(np.maximum(y_base - kink, 0.0)[:, None], dtype=np.float64)
@@ -1080,7 +1098,9 @@ def _fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: E
     sses = [_sse(m, ident) for m in fits]
     best = int(np.argmin(sses))
     model = fits[best]
-    if refine and effect.has_theta and len(grid) > 1:
+    # a term without a parameter of its first form may still have forms that carry one
+    if refine and len(grid) > 1 and (effect.has_theta or any(isinstance(g, tuple)
+                                                             for g in grid)):
         model = _refined(effect, grid, sses, model, build, ident)
     model = _prefer_nested(effect, grid, fits, sses, model, ident)
     if screen is not None:
@@ -1126,6 +1146,8 @@ def _refined(effect: Effect, grid: Sequence[Any], sses: Sequence[float],
         line = sorted(float(g[-1]) if isinstance(g, tuple) else float(g) for g in grid
                       if _prefix(g) == prefix)
         last = float(th[-1]) if isinstance(th, tuple) else float(th)
+        if not np.isfinite(last):  # a form without a parameter (NO_THETA)
+            continue
         k = line.index(last)
         lo, hi = line[max(k - 1, 0)], line[min(k + 1, len(line) - 1)]
         if hi <= lo:

@@ -87,3 +87,26 @@ def test_a_cubic_softening_the_record_cannot_tell_from_a_tanh_is_named_cubic() -
     factory = base_factory_for("gamma", constraint="free", fit_offset=True)
     m = fit_with_effect(factory, [], CANDIDATES["saturation"], run)
     assert m.terms[-1].form == "cubic"
+
+
+def test_a_loading_gain_that_turns_over_along_a_travel_is_recovered_with_its_width() -> None:
+    # y' = c + (y - c)(1 + a s), s the loading state turning over along 2 w of input travel
+    # after each reversal (a friction contact's direction state, not the sign of the speed)
+    from hysteresis.discrepancy._ops import play
+
+    run, y0 = _ident()
+    asym = CANDIDATES["asymmetry"]
+    ctx = asym.context(replace(run, y=y0))
+    width = 0.06 * ctx["input_half"]
+    s = (run.u - play(run.u, width)) / width
+    centre = ctx["centre"]
+    y = centre + (y0 - centre) * (1.0 + 0.04 * s)
+    factory = base_factory_for("gamma", constraint="free", fit_offset=True)
+    m = fit_with_effect(factory, [], asym, replace(run, y=y))
+    term = m.terms[-1]
+    assert term.form == "loading_gain"
+    assert float(term.theta[-1]) * term.context["input_half"] == pytest.approx(width, rel=0.2)
+    # the sign of the speed alone (width 0) leaves the turn-over in the error
+    sign_only = ComposedModel(factory).fit(replace(run, y=y))
+    assert np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2)) < \
+        0.3 * np.sqrt(np.mean((sign_only.predict(replace(run, y=y)) - y) ** 2))
