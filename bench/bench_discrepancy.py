@@ -353,7 +353,8 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
 BASES = ("gamma", "gamma_free", "preisach", "bouc_wen", "coleman_hodgdon")
 
 
-def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]] | None = None
+def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]] | None = None,
+                      plants: tuple[str, ...] | None = None, workers: int = 0
                       ) -> dict[str, Any]:
     """Per injector source, the first effect named (or none) with each of :data:`BASES` given
     explicitly and with ``auto``; the summary counts the sources on which every base agrees
@@ -366,10 +367,13 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
     model with its terms predicts ``workflow.min_relative_gain`` better than the base's with
     its terms, the best family's answer, taken from that family's row.
 
-    ``python -m bench.bench_discrepancy --bases`` runs it alone (about 25 min on 2 cores)."""
+    ``python -m bench.bench_discrepancy --bases`` runs it alone (every plant: 6 workflows for
+    each of 104 sources, several hours on 2 cores); ``--plants`` and ``--forms`` narrow it
+    (one plant: about 30 min)."""
     from hydra import compose, initialize_config_dir
 
     from hysteresis.discrepancy.inject import PLANTS
+    from hysteresis.discrepancy.workflow import WorkflowSettings
     from pipelines.common import CONF_DIR, to_container
     from pipelines.discrepancy import (
         analyse,
@@ -387,21 +391,23 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
     if cases is None:
         cases = {k: v for k, v in injector_cases().items()
                  if k in ("clean", "clean-loaded") or k.endswith("@1")}
+    settings = WorkflowSettings(workers=workers)
     out: dict[str, Any] = {}
     for case, (effects, start, ragged) in cases.items():
-        for plant in PLANTS:
+        for plant in plants or PLANTS:
             runs = injector_runs(plant, effects, start, ragged,
                                  seed=int(case.split("#")[1]) if "#" in case else 0)
             row: dict[str, Any] = {}
             for base in ("auto", *BASES):
                 t0 = time.perf_counter()
                 if base == "auto":
-                    rep, _ = analyse(runs, auto_families=families,
+                    rep, _ = analyse(runs, settings=settings, auto_families=families,
                                      max_bases=int(cfg["max_bases"]),
                                      base_retry_factor=float(cfg["base_retry_factor"]))
                 else:
                     params = {k: v for k, v in families[base].items() if k != "family"}
-                    rep, _ = analyse(runs, base_family=str(families[base].get("family", base)),
+                    rep, _ = analyse(runs, settings=settings,
+                                     base_family=str(families[base].get("family", base)),
                                      base_params=params, auto_families=families,
                                      base_check=False)
                 named = [e["name"] for e in rep["effects"]]
@@ -485,13 +491,13 @@ if __name__ == "__main__":
     parser.add_argument("--strong-only", action="store_true",
                         help="with --cleanroom: the strong strength only")
     parser.add_argument("--plants", default="",
-                        help="with --cleanroom or --injector: comma-separated plants (default: "
-                             "all four)")
+                        help="with --cleanroom, --injector or --bases: comma-separated plants "
+                             "(default: all four)")
     parser.add_argument("--strengths", default="",
                         help="with --injector: comma-separated strengths (default: 1,2)")
     parser.add_argument("--forms", default="",
-                        help="with --injector: comma-separated effect forms (default: all; "
-                             "the clean sources are always run)")
+                        help="with --injector or --bases: comma-separated effect forms "
+                             "(default: all; the clean sources are always run)")
     parser.add_argument("--with-bases", action="store_true",
                         help="with --cleanroom: also each auto family given as the base")
     parser.add_argument("--history", default="auto", choices=("auto", "separate", "chained"),
@@ -514,7 +520,14 @@ if __name__ == "__main__":
             chosen, tuple(p for p in args.plants.split(",") if p) or None,
             workers=args.workers), indent=1))
     elif args.bases:
-        print(json.dumps(base_independence(), indent=1))
+        chosen_bases = None
+        if args.forms:
+            keep = set(args.forms.split(","))
+            chosen_bases = {k: v for k, v in injector_cases((1.0,)).items()
+                            if k in ("clean", "clean-loaded") or k.split("@")[0] in keep}
+        print(json.dumps(base_independence(
+            chosen_bases, tuple(p for p in args.plants.split(",") if p) or None,
+            workers=args.workers), indent=1))
     elif args.cleanroom:
         res = cleanroom_matrix(
             plants=tuple(p for p in args.plants.split(",") if p) or None,
