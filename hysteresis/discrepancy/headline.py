@@ -70,6 +70,9 @@ def _nothing_added(report: Mapping[str, Any], also: str) -> str:
     reach = report.get("within_base_reach") or []
     absorbed = (f"; within the base's reach (it absorbs them, so these runs cannot tell "
                 f"them apart from it): {', '.join(reach)}") if reach else ""
+    dependence = report.get("base_dependence")
+    if dependence:
+        return f"unexplained: {dependence['note']} ({rmse}){also}"
     if report["verdict"] == "unexplained":
         tried_terms = ", ".join(s["name"] for s in (report.get("rankings") or [[]])[0])
         return (f"unexplained: the base {report['base_family']} leaves a residual no "
