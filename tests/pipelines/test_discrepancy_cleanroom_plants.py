@@ -6,7 +6,6 @@ command is in docs/notes/discrepancy-measurements.md."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 from typing import Any
@@ -16,19 +15,15 @@ import pytest
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
 from pipelines.discrepancy_data import ingest_source, runs_from_dataset
+from tests.cleanroom import load
 
-GENERATOR = Path(__file__).resolve().parents[1] / "cleanroom" / "other_plants.py"
 #: The base (as ``auto_families.gamma_free``): free play weights with an offset, start fitted.
 BASE = {"constraint": "free", "fit_offset": True}
 
 
 @pytest.fixture(scope="module")
 def generator() -> Any:
-    spec = importlib.util.spec_from_file_location("cleanroom_other_plants", GENERATOR)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load("other_plants")
 
 
 @pytest.mark.slow
