@@ -457,6 +457,8 @@ class Asymmetry(Effect):
     #: Input travel over which the loading/unloading state turns over after a reversal, as
     #: fractions of the identification input's half-range (refined): 0 is the direction of
     #: motion itself; a friction contact or a follower's slack turns over along a travel.
+    #: Not wider: over a longer travel the state is the lost motion of a backlash (on the
+    #: virtual rig's dead zone a width of 0.2 took the backlash's place).
     turn_widths: ClassVar[tuple[float, ...]] = (0.0, 0.03, 0.07, 0.15)
 
     @staticmethod
@@ -485,8 +487,8 @@ class Asymmetry(Effect):
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
         form = self.form(theta)
         if form == "loading_gain":
-            # the branches' slopes differ by direction, and so does their offset: the
-            # branches of a backlash whose two sides differ in slope
+            # the branches' slopes differ by direction about a pivot, the loading state
+            # turning over after each reversal
             s = self.direction_state(run, float(theta[-1]) * ctx["input_half"])
             pivot = ctx["centre"] + float(theta[1]) * ctx["half"]
             return np.asarray(((y_base - pivot) * s)[:, None], dtype=np.float64)
