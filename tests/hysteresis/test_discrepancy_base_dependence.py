@@ -5,7 +5,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from hysteresis.discrepancy.analysis import BASE_AGREEMENT_FACTOR, base_dependence
+from hysteresis.discrepancy.analysis import (
+    BASE_AGREEMENT_FACTOR,
+    BASE_DEPENDENT_BELOW,
+    base_dependence,
+)
 from hysteresis.discrepancy.headline import headline
 
 
@@ -20,7 +24,7 @@ def _report(kept: list[str], rival: list[str], ratio: float) -> dict[str, Any]:
              "verdict": "missing_effects_found", "rmse_over_noise": 11.0},
             {"base": "preisach", "effects": rival, "heldout_rmse_after": 0.02 * ratio,
              "kept": False, "verdict": "missing_effects_found", "rmse_over_noise": 14.0}],
-        "summary": {"heldout_rmse_before": 0.025},
+        "summary": {"heldout_rmse_before": 0.025, "heldout_reduction_vs_best_plain": 0.2},
         "residual": {"rmse_over_noise": 11.0}}
 
 
@@ -44,6 +48,10 @@ def test_agreeing_bases_or_a_clearly_worse_rival_keep_the_name() -> None:
     assert base_dependence(worse) is None and worse["verdict"] == "missing_effects_found"
     silent = _report(["asymmetry"], [], 1.1)  # a rival that names nothing does not veto
     assert base_dependence(silent) is None
+    # the kept base's terms halve the error: the better base's name stands
+    strong = _report(["drift"], ["tendon_elongation"], 1.1)
+    strong["summary"]["heldout_reduction_vs_best_plain"] = BASE_DEPENDENT_BELOW
+    assert base_dependence(strong) is None
     alone = _report(["drift"], ["tendon_elongation"], 1.1)
     alone["bases_tried"] = alone["bases_tried"][:1]
     assert base_dependence(alone) is None
