@@ -4,13 +4,13 @@ Provenance
 ----------
 Written only from these files (nothing else in the repository was opened):
 
-* ``/work/shared/rig-log-format.md`` -- the ``tsm-rig-log/1`` raw format (run folders, manifest
+* ``../shared/rig-log-format.md`` -- the ``tsm-rig-log/1`` raw format (run folders, manifest
   fields, excitation kinds, encoder / load-cell conventions, "bad input" list);
-* ``/work/shared/seeds/README.md`` and section 3.1 of
-  ``/work/shared/seeds/001_9db1eb7439089598.txt`` -- the bench (input and follower modules,
+* ``../shared/seeds/README.md`` and section 3.1 of
+  ``../shared/seeds/001_9db1eb7439089598.txt`` -- the bench (input and follower modules,
   linear encoders, load cells on both sides, constant-force spring, 10 ms loop, decaying
   sine / triangle / trapezoid excitations);
-* ``/work/main/tests/cleanroom/riglog.py`` -- the clean-room raw-format writer, imported by file
+* ``riglog.py`` (beside this file) -- the clean-room raw-format writer, imported by file
   path and used for excitations (``make_excitation``), run ids (``run_id_for``) and writing
   (``write_run_folder``);
 * textbook physics: Maxwell-slip / elasto-slip friction (Iwan 1966; Lampaert, Al-Bender &
