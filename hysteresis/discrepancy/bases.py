@@ -18,15 +18,20 @@ from hysteresis.discrepancy._ops import FloatArray, play
 
 
 class PlaySumModel(HysteresisModel):
-    """y = sum_i w_i play_{r_i}(u) + b, w_i >= 0, play state starting at u[0]."""
+    """y = sum_i w_i play_{r_i}(u) + b, w_i >= 0 (any sign when ``signed``), each play's state
+    starting at u[0] - start r_i (``start`` 0: at rest; 1: after a pull; -1: after a
+    release)."""
 
     family = "play_sum"
 
     def __init__(self, *, thresholds: tuple[float, ...] | None = None, n: int = 11,
-                 max_threshold: float | None = None) -> None:
+                 max_threshold: float | None = None, signed: bool = False,
+                 start: float = 0.0) -> None:
         self.thresholds = thresholds
         self.n = n
         self.max_threshold = max_threshold
+        self.signed = signed
+        self.start = start
 
     def _r(self, u: FloatArray) -> FloatArray:
         if self.thresholds is not None:
@@ -38,7 +43,7 @@ class PlaySumModel(HysteresisModel):
         return np.linspace(0.0, top, self.n)
 
     def _design(self, u: FloatArray, r: FloatArray) -> FloatArray:
-        cols = [play(u, float(ri), z0=float(u[0])) for ri in r]
+        cols = [play(u, float(ri), z0=float(u[0]) - self.start * float(ri)) for ri in r]
         cols.append(np.ones_like(u))
         return np.column_stack(cols)
 
@@ -53,10 +58,15 @@ class PlaySumModel(HysteresisModel):
         return self
 
     def _solve(self, a: FloatArray, yy: FloatArray) -> None:
+        n = self.thresholds_.size
+        if self.signed:
+            w, *_ = np.linalg.lstsq(a, yy, rcond=None)
+            self.weights_ = np.asarray(w[:n], dtype=np.float64)
+            self.offset_ = float(w[n])
+            return
         # Non-negative weights (any gain: mm -> deg on a bending joint); the free offset is
         # split into a positive and a negative part so that NNLS can carry it.
         x, _ = nnls(np.column_stack([a, -a[:, -1]]), yy, maxiter=50 * a.shape[1])
-        n = self.thresholds_.size
         self.weights_ = np.asarray(x[:n], dtype=np.float64)
         self.offset_ = float(x[n] - x[n + 1])
 
