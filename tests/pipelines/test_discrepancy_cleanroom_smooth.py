@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -22,14 +21,10 @@ from tests.cleanroom import load
 SEED = 1002
 
 
-@pytest.fixture(scope="module")
-def generator() -> Any:
-    return load("smooth_plants")
-
-
 @pytest.mark.slow
 def test_a_relaxing_reading_on_a_bouc_wen_plant_is_named_with_its_form_and_time(
-        generator: Any, tmp_path: Path) -> None:
+        tmp_path: Path) -> None:
+    generator = load("smooth_plants")
     folder = Path(generator.write_source(tmp_path, "bouc_wen_hard", "rate_dependence",
                                          "relaxation", "rest", SEED))
     truth = json.loads((tmp_path / "smooth_plants_truth.json").read_text())
