@@ -1080,7 +1080,8 @@ def _fit_with_effect(base_factory: BaseFactory, fixed: Sequence[Term], effect: E
                      ident: RunData, *, refine: bool, iterations: int) -> ComposedModel:
     ctx = tuple(sorted(effect.context(ident).items()))
     # A slow base (Bouc-Wen, Coleman-Hodgdon, Preisach: an iterative fit) searches the
-    # effect's parameter with its fast screening base and is fitted once, at the chosen value.
+    # effect's parameter with its fast screening base and is fitted with the forms it found
+    # (:func:`_form_on_base`).
     screen = _screen_of(base_factory, ident)
     search = screen or _searching(base_factory)
 
@@ -1284,8 +1285,9 @@ def _walked(base_factory: BaseFactory, model: ComposedModel, effect: Effect, ide
 
 #: The screening base stands in for the real one on a run only where its plain fit's RMSE is
 #: within this factor of the real base's: a play sum that cannot draw the loop ranks an
-#: effect's parameters by its own misfit (on a textbook Bouc-Wen loop with a 0.12 s latency
-#: a play sum 30x worse than the Bouc-Wen ranked 0.04 s first and 0.12 s third).
+#: effect's parameters by its own misfit (on a textbook Bouc-Wen loop with a 0.12 s latency,
+#: a non-negative play sum at rest, 4.4x worse than the Bouc-Wen on the plain run, ranked
+#: 0.04 s first and 0.12 s third).
 SCREEN_TRUST_FACTOR = 3.0
 #: Where the screen with the terms found fits the identification run within this factor
 #: (RMSE) of the real base with them, their parameters are taken as they are; beyond it the
@@ -1386,9 +1388,10 @@ def fit_joint(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect, 
     last), which the composed model does not depend on.
 
     A screened base (an iterative fit: Bouc-Wen, Preisach, Coleman-Hodgdon) runs the whole
-    search on its fast screening base and is fitted once with the terms found: the search
-    compares dozens of parameter sets, each a refit of the base, and the physical parameters
-    do not depend on the hysteresis model beneath them.
+    search on its fast screening base and is fitted with the terms found (and the new term's
+    near-tie forms, :func:`_form_on_base`): the search compares dozens of parameter sets,
+    each a refit of the base. Where no play sum fits the run within
+    :data:`SCREEN_TRUST_FACTOR` of the base, the base searches the new term alone.
     """
     screen = _screen_of(base_factory, ident)
     if screen is not None:
