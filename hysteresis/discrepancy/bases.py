@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import nnls
 
-from hysteresis.base import HysteresisModel, as_1d, check_pair
+from hysteresis.base import HysteresisError, HysteresisModel, as_1d, check_pair
 from hysteresis.discrepancy._ops import FloatArray, play
 
 
@@ -48,6 +48,9 @@ class PlaySumModel(HysteresisModel):
         return np.column_stack(cols)
 
     def fit(self, u: Any, y: Any, **fit_params: Any) -> PlaySumModel:
+        if not -1.0 <= float(self.start) <= 1.0:
+            raise HysteresisError(f"play_sum: start must lie in [-1, 1] (-1 after a release, 0 at "
+                                  f"rest, 1 after a pull), got {self.start!r}")
         uu, yy = check_pair(u, y)
         r = self._r(uu)
         a = self._design(uu, r)

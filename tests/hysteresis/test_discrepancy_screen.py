@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hysteresis.base import HysteresisError
 from hysteresis.discrepancy._ops import play
 from hysteresis.discrepancy.bases import PlaySumModel
 from hysteresis.discrepancy.effects import (
@@ -37,6 +38,12 @@ def test_a_play_sum_with_a_negative_weight_started_after_a_pull_is_recovered() -
     # non-negative plays at rest cannot draw it
     rough = PlaySumModel(thresholds=R).fit(u, y)
     assert np.sqrt(np.mean((rough.predict(u) - y) ** 2)) > 0.05
+
+
+def test_a_start_outside_the_band_is_refused_with_its_meaning() -> None:
+    u = _input()
+    with pytest.raises(HysteresisError, match=r"start must lie in \[-1, 1\].*got 2"):
+        PlaySumModel(start=2).fit(u, u)
 
 
 def test_the_screen_is_the_play_sum_that_fits_and_none_where_none_does() -> None:
