@@ -112,6 +112,34 @@ class AffineModel(HysteresisModel):
         return np.asarray(self.gain_ * uu + self.offset_, dtype=np.float64)
 
 
+class FrozenShapeModel(HysteresisModel):
+    """y = a base(u) + b with ``fitted``, a base already fitted, kept as it is: its loop's
+    shape (and start) frozen, only a gain and an offset refitted. A screen for an effect's
+    parameters where no play sum draws the base's loop: one prediction of the fitted base per
+    grid point instead of one iterative fit."""
+
+    family = "frozen_shape"
+
+    def __init__(self, fitted: HysteresisModel | None = None) -> None:
+        self.fitted = fitted
+
+    def _shape(self, u: FloatArray) -> FloatArray:
+        if self.fitted is None:
+            raise HysteresisError("frozen_shape: needs a fitted base")
+        return np.asarray(self.fitted.predict(u), dtype=np.float64)
+
+    def fit(self, u: Any, y: Any, **fit_params: Any) -> FrozenShapeModel:
+        uu, yy = check_pair(u, y)
+        a = np.column_stack([self._shape(uu), np.ones_like(uu)])
+        (self.gain_, self.offset_), *_ = np.linalg.lstsq(a, yy, rcond=None)
+        return self
+
+    def predict(self, u: Any, *, state: Any = None) -> FloatArray:
+        self.check_fitted()
+        uu = as_1d(u, "u")
+        return np.asarray(self.gain_ * self._shape(uu) + self.offset_, dtype=np.float64)
+
+
 LOCAL_BASES: dict[str, type[HysteresisModel]] = {"play_sum": PlaySumModel, "affine": AffineModel}
 
 

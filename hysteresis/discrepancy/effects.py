@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, replace
-from functools import partial
+from functools import cache, partial
 from typing import Any, ClassVar
 
 import numpy as np
@@ -28,6 +28,7 @@ from scipy.optimize import minimize_scalar
 
 from hysteresis.base import HysteresisError, HysteresisModel
 from hysteresis.discrepancy._ops import FloatArray, play, scaled_play, scaled_play_bank, shift
+from hysteresis.discrepancy.bases import FrozenShapeModel
 from hysteresis.discrepancy.runs import RunData
 from hysteresis.lag import delay_grid
 
@@ -190,16 +191,23 @@ class RateDependence(Effect):
     #: lag (reported as relaxation): the follower's motion itself relaxes, c (LP_T(M) - M)
     #: with M the model's motion (c = 1: a first-order lag of time constant T of the output,
     #: a viscoelastic transmission), which holds still where the plays hold the output.
+    #: slip (reported as speed_friction, bases without play operators): the lost motion
+    #: itself grows with the speed, a backlash on the input of half-width c tanh(|v| / v0)
+    #: that holds the input at a reversal as the friction does (the play-scaled form of a
+    #: Gamma base), where the shifted input above follows the speed's sign at once.
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
         "viscous": ("output", 1, False), "power": ("output", 1, False),
-        "relaxation": ("output", 1, False), "lag": ("output", 1, True)}
-    labels: ClassVar[dict[str, str]] = {"lag": "relaxation"}
+        "relaxation": ("output", 1, False), "lag": ("output", 1, True),
+        "slip": ("input", 0, False)}
+    labels: ClassVar[dict[str, str]] = {"lag": "relaxation", "slip": "speed_friction"}
 
     def grid(self, ident: RunData) -> list[Any]:
         vmax = float(np.percentile(np.abs(ident.v), 99))
         span = float(np.ptp(ident.u))
         return [(f * vmax, c * span) for f in (0.3, 0.8, 3.0)
-                for c in (0.003, 0.01, 0.025, 0.05, 0.08)] + self.form_grid(ident)
+                for c in (0.003, 0.01, 0.025, 0.05, 0.08)] \
+            + [("slip", f * vmax, c * span) for f in (0.25, 0.5, 1.0, 3.0)
+               for c in (0.003, 0.01, 0.025, 0.05, 0.1)] + self.form_grid(ident)
 
     def form_grid(self, ident: RunData) -> list[Any]:
         return [("viscous", 0.0), ("power", 0.5), ("power", 2.0), ("relaxation", 0.3),
@@ -231,6 +239,10 @@ class RateDependence(Effect):
 
     def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
                         friction: FloatArray | None = None) -> FloatArray:
+        if self.form(theta) == "slip":
+            _, v0, c = theta
+            half = c * np.tanh(np.abs(speed(run)) / v0)
+            return scaled_play(u, half, z0=float(u[0]))
         v0, c = theta
         return np.asarray(u - c * np.tanh(run.v / v0), dtype=np.float64)
 
@@ -278,9 +290,11 @@ class TendonElongation(Effect):
     #: side), with the output load cell. Stretches linear in a tension are not searched: a
     #: tendon-sheath's own tendon is such a spring, in every clean record (on clean
     #: virtual-rig runs one linear in the input tension took 23 % of the free Gamma's held-out
-    #: error), and the output tension follows the output through the follower's spring, so a
-    #: term linear in it is a gain (with a free sign it also took up a speed-dependent
-    #: friction the output load cell feels, on clean-room runs).
+    #: error; searched with the capstan path, it was named on the virtual rig's dead zone
+    #: ahead of the asymmetry that reproduces it), and the output tension follows the output
+    #: through the follower's spring, so a term linear in it is a gain (with a free sign it
+    #: also took up a speed-dependent friction the output load cell feels, on clean-room
+    #: runs).
     #: reading (reported as square_input): c (T_in^2 - T_in(0)^2) on the reading itself, a
     #: stretch by the input tension's square between the friction and the output's sensor
     #: (the friction does not hold it back).
@@ -450,12 +464,20 @@ class Asymmetry(Effect):
             "on a grid, refined; w = 0: the direction of motion); pull_push_gain: "
             "c (y_base - kink) on the pull side of a kink only, the kink at centre + k half "
             "(k on a grid, refined: the plant's rest, off the recorded range's centre when one "
-            "side's gain differs)")
+            "side's gain differs); held_gain (reported as loading_gain): c (B_g(y_base) - "
+            "y_base), B_g a backlash with different slopes (Tao and Kokotovic): the output "
+            "follows a branch 1 + g as steep one way as the other (1 - g), both through a "
+            "pivot at the recorded range's top or bottom, and is held in between (a play of "
+            "half-width g |y_base - pivot|); g on a grid, refined")
     n_linear = 1
     before_stop = True
     first_form = "one_way_backlash"
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
-        "loading_gain": ("output", 1, True), "pull_push_gain": ("output", 1, True)}
+        "loading_gain": ("output", 1, True), "pull_push_gain": ("output", 1, True),
+        "held_gain": ("output", 1, True)}
+    labels: ClassVar[dict[str, str]] = {"held_gain": "loading_gain"}
+    #: Slope differences g of the held form (refined): the branches 1 + g and 1 - g.
+    held_slopes: ClassVar[tuple[float, ...]] = (0.03, 0.06, 0.12, 0.25)
     #: Input travel over which the loading/unloading state turns over after a reversal, as
     #: fractions of the identification input's half-range (refined): 0 is the direction of
     #: motion itself; a friction contact or a follower's slack turns over along a travel.
@@ -478,8 +500,10 @@ class Asymmetry(Effect):
     def form_grid(self, ident: RunData) -> list[Any]:
         # the pull/push kink sits at the plant's rest, which a side's gain moves off the
         # recorded range's centre (a push side at 0.75 moves it by 0.14 of the half-range)
+        # the held form's pivot at the range's top (loading the steeper) or bottom
         return [*[("loading_gain", k, w) for k in (-1.0, 0.0, 1.0) for w in self.turn_widths],
-                *[("pull_push_gain", k) for k in (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)]]
+                *[("pull_push_gain", k) for k in (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)],
+                *[("held_gain", k, g) for k in (-1.0, 1.0) for g in self.held_slopes]]
 
     def context(self, ident: RunData) -> Ctx:
         return {"centre": 0.5 * float(ident.y.max() + ident.y.min()),
@@ -494,6 +518,13 @@ class Asymmetry(Effect):
             s = self.direction_state(run, float(theta[-1]) * ctx["input_half"])
             pivot = ctx["centre"] + float(theta[1]) * ctx["half"]
             return np.asarray(((y_base - pivot) * s)[:, None], dtype=np.float64)
+        if form == "held_gain":
+            # held between two branches through the pivot: the gap between them grows with
+            # the distance from it (pivot at the top: loading the steeper)
+            pivot = ctx["centre"] + float(theta[1]) * ctx["half"]
+            gap = float(theta[-1]) * np.abs(y_base - pivot)
+            held = scaled_play(y_base, gap, z0=float(y_base[0]))
+            return np.asarray((held - y_base)[:, None], dtype=np.float64)
         if form == "pull_push_gain":
             kink = ctx["centre"] + float(theta[-1]) * ctx.get("half", 0.0)
             return np.asarray(np.maximum(y_base - kink, 0.0)[:, None], dtype=np.float64)
@@ -1194,14 +1225,26 @@ def _prefer_nested(effect: Effect, grid: Sequence[Any], fits: Sequence[ComposedM
 FORM_REFINE_FACTOR = 1.25
 
 
-def _only_form(effect: Effect, form: str) -> Effect:
-    """``effect`` searched over the grid points of one ``form`` only (a shallow copy)."""
+def only_forms(effect: Effect, keep: Callable[[Any], bool]) -> Effect:
+    """``effect`` searched over the grid points ``keep`` accepts only (a shallow copy)."""
     one = copy.copy(effect)
     grid, operator_grid = effect.grid, effect.operator_grid
     vars(one).update(
-        grid=lambda ident: [g for g in grid(ident) if effect.form(g) == form],
-        operator_grid=lambda ident: [g for g in operator_grid(ident) if effect.form(g) == form])
+        grid=lambda ident: [g for g in grid(ident) if keep(g)],
+        operator_grid=lambda ident: [g for g in operator_grid(ident) if keep(g)])
     return one
+
+
+def _only_form(effect: Effect, form: str) -> Effect:
+    """``effect`` searched over the grid points of one ``form`` only."""
+    return only_forms(effect, lambda g: effect.form(g) == form)
+
+
+@cache  # one copy per candidate: the fits memoised for it are found again in later rounds
+def claiming(effect: Effect) -> Effect:
+    """``effect`` searched over the forms that make its load-cell claim only."""
+    return only_forms(effect, lambda g: effect.claims({effect.labels.get(effect.form(g),
+                                                                          effect.form(g))}))
 
 
 #: The forms the real base is fitted with: the screen's choice and every form whose best
@@ -1287,7 +1330,8 @@ def _walked(base_factory: BaseFactory, model: ComposedModel, effect: Effect, ide
 #: within this factor of the real base's: a play sum that cannot draw the loop ranks an
 #: effect's parameters by its own misfit (on a textbook Bouc-Wen loop with a 0.12 s latency,
 #: a non-negative play sum at rest, 4.4x worse than the Bouc-Wen on the plain run, ranked
-#: 0.04 s first and 0.12 s third).
+#: 0.04 s first and 0.12 s third); beyond it the real base's own plain fit, its shape frozen,
+#: screens instead.
 SCREEN_TRUST_FACTOR = 3.0
 #: Where the screen with the terms found fits the identification run within this factor
 #: (RMSE) of the real base with them, their parameters are taken as they are; beyond it the
@@ -1308,32 +1352,38 @@ class ScreenedFactory:
     def __init__(self, base: BaseFactory, screen: Callable[..., HysteresisModel]) -> None:
         self.base = base
         self.screen = screen
-        self._screens: dict[RunData, BaseFactory | None] = {}
+        self._screens: dict[RunData, BaseFactory] = {}
 
     def __call__(self) -> HysteresisModel:
         return self.base()
 
-    def screen_for(self, ident: RunData) -> BaseFactory | None:
+    def screen_for(self, ident: RunData) -> BaseFactory:
         """The play sum that fits ``ident`` best (plain, on the identification SSE), when it
-        comes within :data:`SCREEN_TRUST_FACTOR` of the real base's RMSE; else None."""
+        comes within :data:`SCREEN_TRUST_FACTOR` of the real base's RMSE; else the real base's
+        plain fit with its shape frozen (:class:`.bases.FrozenShapeModel`)."""
         if ident in self._screens:
             return self._screens[ident]
-        real = _sse(ComposedModel(self.base, []).fit(ident), ident)
-        best, best_sse = None, np.inf
+        plain = ComposedModel(self.base, []).fit(ident)
+        real = _sse(plain, ident)
+        best: BaseFactory = partial(FrozenShapeModel, fitted=plain.base_)
+        best_sse = np.inf
         for signed in (False, True):
             for start in SCREEN_STARTS:
                 f = partial(self.screen, signed=signed, start=start)
                 sse = _sse(ComposedModel(f, []).fit(ident), ident)
                 if sse < 0.98 * best_sse:  # the first (at rest, weights >= 0) unless beaten
                     best, best_sse = f, sse
-        chosen = best if best_sse <= SCREEN_TRUST_FACTOR ** 2 * real else None
-        self._screens[ident] = chosen
-        return chosen
+        if best_sse > SCREEN_TRUST_FACTOR ** 2 * real:
+            # no play sum draws this loop (a loaded textbook Bouc-Wen: 3.9x the real base's
+            # RMSE), and the real base searching every grid point itself took minutes
+            best = partial(FrozenShapeModel, fitted=plain.base_)
+        self._screens[ident] = best
+        return best
 
 
 def _screen_of(base_factory: BaseFactory, ident: RunData) -> BaseFactory | None:
     """The screening base that searches ``base_factory``'s effect parameters on ``ident``
-    (None: the base searches them itself)."""
+    (None: a base fast enough to search them itself)."""
     if isinstance(base_factory, ScreenedFactory):
         return base_factory.screen_for(ident)
     return None
@@ -1391,16 +1441,13 @@ def fit_joint(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect, 
     search on its fast screening base and is fitted with the terms found (and the new term's
     near-tie forms, :func:`_form_on_base`): the search compares dozens of parameter sets,
     each a refit of the base. Where no play sum fits the run within
-    :data:`SCREEN_TRUST_FACTOR` of the base, the base searches the new term alone.
+    :data:`SCREEN_TRUST_FACTOR` of the base, the base's plain fit with its shape frozen
+    screens (:meth:`ScreenedFactory.screen_for`).
     """
     screen = _screen_of(base_factory, ident)
     if screen is not None:
         found = fit_joint(screen, fixed, effect, ident, iterations=iterations)
         return _form_on_base(base_factory, screen, found, effect, ident, iterations)
-    if isinstance(base_factory, ScreenedFactory):
-        # a slow base the screen cannot stand in for: its own grid for the new term, the
-        # earlier terms as they were (a joint search would refit it hundreds of times)
-        return fit_with_effect(base_factory.base, fixed, effect, ident, iterations=iterations)
     on_top = retune(base_factory, fit_with_effect(base_factory, fixed, effect, ident,
                                                   iterations=iterations), ident,
                     iterations=iterations)

@@ -110,3 +110,47 @@ def test_a_loading_gain_that_turns_over_along_a_travel_is_recovered_with_its_wid
     sign_only = ComposedModel(factory).fit(replace(run, y=y))
     assert np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2)) < \
         0.3 * np.sqrt(np.mean((sign_only.predict(replace(run, y=y)) - y) ** 2))
+
+
+def _slope_backlash(x: np.ndarray, g: float, pivot: float) -> np.ndarray:
+    """Tao and Kokotovic's backlash with different slopes: the output rides the branch
+    1 + g while ``x`` rises and 1 - g while it falls (both through ``pivot``), held between."""
+    out = np.empty_like(x)
+    z = float(x[0])
+    for k, xk in enumerate(x):
+        up, down = xk + g * (xk - pivot), xk - g * (xk - pivot)
+        z = max(z, up) if xk - x[k - 1] > 0 else z
+        z = min(z, down) if xk - x[k - 1] < 0 else z
+        out[k] = z
+    return out
+
+
+def test_a_backlash_with_different_slopes_is_recovered_as_a_held_loading_gain() -> None:
+    run, y0 = _ident()
+    pivot = float(y0.max())
+    y = _slope_backlash(y0, 0.08, pivot)
+    factory = base_factory_for("gamma", constraint="free", fit_offset=True)
+    m = fit_with_effect(factory, [], CANDIDATES["asymmetry"], replace(run, y=y))
+    term = m.terms[-1]
+    assert term.form == "loading_gain" and term.theta[:2] == ("held_gain", 1.0)
+    assert float(term.theta[-1]) * float(m.coef_[0]) == pytest.approx(0.08, rel=0.15)
+    assert np.sqrt(np.mean((m.predict(replace(run, y=y)) - y) ** 2)) < 0.01
+
+
+def test_a_lost_motion_growing_with_the_speed_is_a_slip_on_a_base_without_plays() -> None:
+    # a backlash on the input of half-width c tanh(|v| / v0) in front of a Bouc-Wen loop
+    from hysteresis.discrepancy._ops import scaled_play
+    from hysteresis.discrepancy.effects import speed
+
+    full = injected_runs("bouc_wen_loop", kinds=("sine_decay",))[0]
+    run = full.segment(0, 750, role=full.role, suffix="head")
+    v0 = 0.5 * float(np.percentile(np.abs(run.v), 99))
+    u_seen = scaled_play(run.u, 0.6 * np.tanh(np.abs(speed(run)) / v0), z0=float(run.u[0]))
+    factory = base_factory_for("bouc_wen")  # searched on its play-sum screen
+    plain = ComposedModel(factory).fit(run)
+    y = plain.base_.predict(u_seen)
+    m = fit_with_effect(factory, [], CANDIDATES["rate_dependence"], replace(run, y=y))
+    term = m.terms[-1]
+    assert term.form == "speed_friction" and term.theta[0] == "slip"
+    assert float(term.theta[1]) == pytest.approx(v0, rel=0.01)
+    assert float(term.theta[-1]) == pytest.approx(0.6, rel=0.1)

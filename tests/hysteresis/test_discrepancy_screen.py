@@ -9,7 +9,7 @@ import pytest
 
 from hysteresis.base import HysteresisError
 from hysteresis.discrepancy._ops import play
-from hysteresis.discrepancy.bases import PlaySumModel
+from hysteresis.discrepancy.bases import FrozenShapeModel, PlaySumModel
 from hysteresis.discrepancy.effects import (
     CANDIDATES,
     ComposedModel,
@@ -46,16 +46,50 @@ def test_a_start_outside_the_band_is_refused_with_its_meaning() -> None:
         PlaySumModel(start=2).fit(u, u)
 
 
-def test_the_screen_is_the_play_sum_that_fits_and_none_where_none_does() -> None:
+def test_the_screen_is_the_play_sum_that_fits_and_the_frozen_base_where_none_does() -> None:
     runs = injected_runs("bouc_wen_loop", {}, start="rest")
     factory = base_factory_for("bouc_wen")
     assert isinstance(factory, ScreenedFactory)
     screen = factory.screen_for(runs[0])
-    assert screen is not None and screen.keywords["signed"]  # type: ignore[attr-defined]
-    # a base far better than any play sum (here: the truth itself) searches on its own
+    assert screen.func is PlaySumModel and screen.keywords["signed"]  # type: ignore[attr-defined]
+    # a base far better than any play sum (here: the truth itself) screens with its own
+    # plain fit, its shape frozen
     y = np.asarray(runs[0].y)
     exact = ScreenedFactory(lambda: _Replay(y), PlaySumModel)
-    assert exact.screen_for(runs[0]) is None
+    frozen = exact.screen_for(runs[0])
+    assert frozen.func is FrozenShapeModel  # type: ignore[attr-defined]
+    assert _sse(ComposedModel(frozen, []).fit(runs[0]), runs[0]) == pytest.approx(0.0, abs=1e-18)
+
+
+def test_a_frozen_shape_refits_only_its_gain_and_offset() -> None:
+    u = _input()
+    shape = PlaySumModel(thresholds=R).fit(u, sum(play(u, r) for r in R))
+    frozen = FrozenShapeModel(shape).fit(u, 2.0 * shape.predict(u) + 1.0)
+    assert (frozen.gain_, frozen.offset_) == pytest.approx((2.0, 1.0), abs=1e-9)
+    with pytest.raises(HysteresisError, match="needs a fitted base"):
+        FrozenShapeModel().fit(u, u)
+
+
+def test_a_latency_is_searched_on_the_frozen_base_where_no_play_sum_draws_the_loop() -> None:
+    ident = injected_runs("bouc_wen_loop", {"time_delay": 1.0}, start="rest")[0]
+    real = base_factory_for("bouc_wen")
+    assert isinstance(real, ScreenedFactory)
+    factory = ScreenedFactory(real.base, _Flat)  # a screen that draws no loop at all
+    assert factory.screen_for(ident).func is FrozenShapeModel  # type: ignore[attr-defined]
+    m = fit_joint(factory, [], CANDIDATES["time_delay"], ident)
+    assert float(m.terms[-1].theta) == pytest.approx(0.12, abs=0.015)
+
+
+class _Flat(PlaySumModel):
+    """A 'screen' that fits a constant."""
+
+    def fit(self, u: object, y: object, **fit_params: object) -> _Flat:
+        self.weights_, self.offset_ = np.zeros(1), float(np.mean(np.asarray(y)))
+        self.thresholds_ = np.zeros(1)
+        return self
+
+    def predict(self, u: object, *, state: object = None) -> np.ndarray:
+        return np.full(np.asarray(u).size, self.offset_)
 
 
 class _Replay(PlaySumModel):
