@@ -38,6 +38,7 @@ from hysteresis.discrepancy.effects import (
     ComposedModel,
     Effect,
     Term,
+    claiming,
     fit_joint,
     fit_with_effect,
     memoised_fits,
@@ -68,9 +69,12 @@ class WorkflowSettings:
     #: cells can read (a friction change, a dead travel) must show in that reading and goes
     #: first when it does (False: judge on the output alone, for comparison).
     physical_evidence: bool = True
-    #: When no single candidate clears the bar, try every pair: two effects that interact
-    #: (the base bends to one and hides the other) are added together when the pair removes
-    #: at least ``min_relative_gain`` more than its better member alone.
+    #: When no single candidate clears the bar and nothing is named yet, try every pair: two
+    #: effects that interact (the base bends to one and hides the other) are added together
+    #: when the pair removes at least ``min_relative_gain`` more than its better member alone.
+    #: After a first effect the search would look for a third and a fourth at once: it was
+    #: the slowest sources' largest cost (a Bouc-Wen plant's strength-2 speed friction: 73 of
+    #: its 119 s CPU, for nothing), and a pair it added carried a passenger.
     pair_search: bool = True
     #: The pair search tries the pairs with at least one member among this many of the best
     #: single candidates (by delta BIC; 15 of the 21 pairs of seven at 3). The partner may rank
@@ -182,7 +186,16 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
     """Add ``effect`` to every configuration's model, refit, and measure what it removes;
     for a candidate with a load-cell claim, also read the load cells for it (``load_cells``:
     that reading when already made, it does not depend on the model).
-    ``joint_retune``: search the earlier terms' nonlinear parameters again (:func:`fit_joint`)."""
+    ``joint_retune``: search the earlier terms' nonlinear parameters again (:func:`fit_joint`).
+
+    Where the load cells show what the effect claims, only the forms that make the claim are
+    searched: the reading measured the mechanism (on the virtual rig a friction asymmetry the
+    two load cells read was otherwise fitted as a held loading gain, a form the reading does
+    not speak for, and lost its place to a stretch)."""
+    evidence = load_cells if load_cells is not None else corroboration(
+        effect.name, [g.ident for g in groups])
+    if evidence.get("corroborated"):
+        effect = claiming(effect)
     models = {}
     for g in groups:
         fixed = terms.get(g.key, [])
@@ -208,8 +221,6 @@ def score_candidate(effect: Effect, base_factory: BaseFactory, groups: Sequence[
         term = models[g.key].terms[-1]
         coef = models[g.key].coef_
         params[g.key] = {**term.to_dict(), "coefficients": [float(c) for c in coef]}
-    evidence = load_cells if load_cells is not None else corroboration(
-        effect.name, [g.ident for g in groups])
     forms = {models[g.key].terms[-1].form for g in groups}
     if evidence.get("claim") is not None and not effect.claims(forms):
         # a backlash claims a dead travel at the reversals, a direction-dependent friction a
@@ -464,10 +475,11 @@ def _winners(scores: list[dict[str, Any]], st: WorkflowSettings, n_effects: int,
     winner = winner or next((s for s in scores if _accept(s, st)), None)
     if winner is not None:
         return [winner]
-    # Pairs only while what is left would not be called clean: a residual within the
-    # clean band has nothing for two more terms to explain, and the pair search is the
-    # workflow's most expensive step.
-    if (st.pair_search and st.max_effects - n_effects >= 2 and over_noise > st.clean_factor):
+    # Pairs only before a first effect, and while what is left would not be called clean: a
+    # residual within the clean band has nothing for two more terms to explain, and the
+    # pair search is the workflow's most expensive step.
+    if (st.pair_search and n_effects == 0 and st.max_effects >= 2
+            and over_noise > st.clean_factor):
         return pairs()
     return []
 
