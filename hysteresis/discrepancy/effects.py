@@ -290,8 +290,8 @@ class TendonElongation(Effect):
     #: side), with the output load cell. Stretches linear in a tension are not searched: a
     #: tendon-sheath's own tendon is such a spring, in every clean record (on clean
     #: virtual-rig runs one linear in the input tension took 23 % of the free Gamma's held-out
-    #: error; searched with the capstan path, it was named on the virtual rig's dead zone
-    #: ahead of the asymmetry that reproduces it), and the output tension follows the output
+    #: error; searched along the capstan path, it was named first on the virtual rig's
+    #: friction asymmetry with a dead zone), and the output tension follows the output
     #: through the follower's spring, so a term linear in it is a gain (with a free sign it
     #: also took up a speed-dependent friction the output load cell feels, on clean-room
     #: runs).
@@ -1365,20 +1365,19 @@ class ScreenedFactory:
             return self._screens[ident]
         plain = ComposedModel(self.base, []).fit(ident)
         real = _sse(plain, ident)
-        best: BaseFactory = partial(FrozenShapeModel, fitted=plain.base_)
-        best_sse = np.inf
+        # where no play sum draws the loop (a loaded textbook Bouc-Wen: 3.9x the real base's
+        # RMSE): the real base searching every grid point itself took minutes
+        frozen: BaseFactory = partial(FrozenShapeModel, fitted=plain.base_)
+        best, best_sse = frozen, np.inf
         for signed in (False, True):
             for start in SCREEN_STARTS:
                 f = partial(self.screen, signed=signed, start=start)
                 sse = _sse(ComposedModel(f, []).fit(ident), ident)
                 if sse < 0.98 * best_sse:  # the first (at rest, weights >= 0) unless beaten
                     best, best_sse = f, sse
-        if best_sse > SCREEN_TRUST_FACTOR ** 2 * real:
-            # no play sum draws this loop (a loaded textbook Bouc-Wen: 3.9x the real base's
-            # RMSE), and the real base searching every grid point itself took minutes
-            best = partial(FrozenShapeModel, fitted=plain.base_)
-        self._screens[ident] = best
-        return best
+        chosen = best if best_sse <= SCREEN_TRUST_FACTOR ** 2 * real else frozen
+        self._screens[ident] = chosen
+        return chosen
 
 
 def _screen_of(base_factory: BaseFactory, ident: RunData) -> BaseFactory | None:
