@@ -63,3 +63,15 @@ def catheter_dir() -> Path:
         pytest.fail(f"real catheter data not found at {folder}: put the lab's shared folder "
                     "beside the repository or set TSM_SHARED_DIR")
     return folder
+
+
+@pytest.fixture(scope="session")
+def stage_auto_families() -> dict:
+    """The discrepancy stage's plain families for ``base_family=auto``, as composed from
+    ``conf/discrepancy.yaml``."""
+    from hydra import compose, initialize_config_dir
+
+    from pipelines.common import CONF_DIR, to_container
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return dict(to_container(compose("discrepancy"))["auto_families"])

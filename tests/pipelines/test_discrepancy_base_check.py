@@ -7,7 +7,6 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
-from hydra import compose, initialize_config_dir
 
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.base_check import base_misfit, second_opinion
@@ -15,13 +14,11 @@ from hysteresis.discrepancy.headline import headline
 from hysteresis.discrepancy.inject import SIZES, injected_runs
 from hysteresis.discrepancy.ranking import choose_base, pick_base
 from hysteresis.discrepancy.workflow import base_factory_for, run_workflow
-from pipelines.common import CONF_DIR, to_container
 
 
 @pytest.fixture(scope="module")
-def families() -> dict[str, Any]:
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return dict(to_container(compose("discrepancy"))["auto_families"])
+def families(stage_auto_families: dict[str, Any]) -> dict[str, Any]:
+    return stage_auto_families
 
 
 def test_a_flagged_base_is_answered_for_by_the_best_family(families: dict[str, Any]) -> None:

@@ -10,23 +10,16 @@ import json
 from pathlib import Path
 
 import pytest
-from hydra import compose, initialize_config_dir
 
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
-from pipelines.common import CONF_DIR, to_container
 from pipelines.discrepancy_data import ingest_source, runs_from_dataset
 from tests.cleanroom import load
 
 
-def compose_discrepancy() -> dict:
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return dict(to_container(compose("discrepancy")))
-
-
 @pytest.mark.slow
 def test_a_backlash_with_different_slopes_is_named_a_loading_gain_with_its_slopes(
-        tmp_path: Path) -> None:
+        tmp_path: Path, stage_auto_families: dict) -> None:
     generator = load("slope_backlash")
     folder = Path(generator.write_source(tmp_path, "play_sum", "slope_backlash", "weak"))
     truth = json.loads((tmp_path / "slope_backlash_truth.json").read_text())
@@ -35,7 +28,7 @@ def test_a_backlash_with_different_slopes_is_named_a_loading_gain_with_its_slope
     assert rep["rejected"] == [] and len(meta) == 3
     runs = runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)
     # the stage's defaults: the base chosen among the plain families
-    out, _ = analyse(runs, auto_families=dict(compose_discrepancy()["auto_families"]),
+    out, _ = analyse(runs, auto_families=stage_auto_families,
                      settings=WorkflowSettings(max_effects=1))
     first = out["effects"][0]
     assert (first["name"], first["form"]) == ("asymmetry", "loading_gain"), json.dumps(
