@@ -361,8 +361,9 @@ class DiscrepancyConfig:
     #: in the load cells), pair_search and pair_pool (when no single term clears the bar,
     #: pairs with a member among the best pair_pool singles), joint_retune, clean_factor
     #: (no_missing_effect only within this multiple of the noise floor; beyond it,
-    #: unexplained). Override as ``workflow.<knob>=<value>``; its ``progress`` and
-    #: ``workers`` follow the stage's.
+    #: unexplained), compare_forms (a named effect's other forms judged on the held-out
+    #: runs: a better one taken, the ties reported as not separable). Override as
+    #: ``workflow.<knob>=<value>``; its ``progress`` and ``workers`` follow the stage's.
     workflow: WorkflowSettings = field(default_factory=WorkflowSettings)
     #: Processes that score the candidates, forked from the stage's (0: one per core this
     #: process may use; 1: all in the stage's process). Sets ``workflow.workers``; the answer

@@ -18,12 +18,20 @@ def headline(report: Mapping[str, Any]) -> str:
     ident = report.get("identifiability")
     for i, e in enumerate(report["effects"]):
         cut = 1.0 - e["heldout_rmse_after"] / e["heldout_rmse_before"]
-        name = f"{e['name']} ({e['form']})" if e.get("form") else e["name"]
+        name = f"{e['name']} ({_form(e)})" if e.get("form") else e["name"]
         if i == 0 and ident:
             name = ident["statement"]
         parts.append(f"{name} (held-out RMSE {e['heldout_rmse_before']:.4g} -> "
                      f"{e['heldout_rmse_after']:.4g}, -{100 * cut:.1f} %)")
     return f"base {report['base_family']} is missing: " + "; then ".join(parts) + also
+
+
+def _form(effect: Mapping[str, Any]) -> str:
+    """The named form, or the forms the held-out runs cannot tell apart."""
+    ties = effect.get("forms_not_separable") or []
+    if len(ties) < 2:
+        return str(effect["form"])
+    return " or ".join(ties) + ": not separable on these runs"
 
 
 def _measured(report: Mapping[str, Any]) -> str:

@@ -42,6 +42,7 @@ from hysteresis.discrepancy.effects import (
     fit_joint,
     fit_with_effect,
     memoised_fits,
+    only_forms,
 )
 from hysteresis.discrepancy.evidence import corroboration, tension_speed_share
 from hysteresis.discrepancy.identifiability import force_statement, statement
@@ -94,6 +95,10 @@ class WorkflowSettings:
     #: depend on it.
     workers: int = 1
     progress: bool = False
+    #: After an effect is named, each of its other forms is fitted in its place and judged on
+    #: the held-out runs; the forms within :data:`FORM_BIC_MARGIN` of the named one are
+    #: reported as not separable from it (False: the form the identification fit chose, alone).
+    compare_forms: bool = True
 
 
 @dataclass
@@ -392,9 +397,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     st = settings or WorkflowSettings()
     groups = group_runs(runs)
     joins: list[dict[str, Any]] = []  # each round's comparison, until the runs are joined
-    for name in st.candidates:
-        if name not in CANDIDATES:
-            raise HysteresisError(f"unknown candidate {name!r}; known: {', '.join(EFFECT_NAMES)}")
+    _check_candidates(st.candidates)
     terms: dict[str, list[Term]] = {g.key: [] for g in groups}
     models = fit_models(base_factory, groups, terms)
     current = evaluate(models, groups)
@@ -440,9 +443,16 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                                  load_cells, st))
         if not added:
             break
-        for k, chosen in enumerate(added):
+        for k, offered in enumerate(added):
+            # judged against the model before this addition (a pair's second: after the
+            # first, which it was fitted on, so a pair keeps its forms)
+            chosen, forms = (compare_forms(offered, base_factory, groups, terms, current, n_eff,
+                                           load_cells[offered["name"]], st,
+                                           noise_floor=loc["noise_floor"],
+                                           switch=len(added) == 1)
+                             if st.compare_forms else (offered, None))
             effects.append(_effect_entry(chosen, added, k, scores, loc, groups, current,
-                                         model_error))
+                                         model_error, forms))
             for g in groups:
                 terms[g.key] = list(chosen["models"][g.key].terms)
             models = chosen["models"]
@@ -462,6 +472,12 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                                for n in skipped},
         "candidates_failed": failed, "rankings": rankings, "library_screen": screens,
         "runs_joined": joins})
+
+
+def _check_candidates(names: Sequence[str]) -> None:
+    for name in names:
+        if name not in CANDIDATES:
+            raise HysteresisError(f"unknown candidate {name!r}; known: {', '.join(EFFECT_NAMES)}")
 
 
 def _winners(scores: list[dict[str, Any]], st: WorkflowSettings, n_effects: int,
@@ -588,12 +604,102 @@ def _identifiability(effects: list[dict[str, Any]], channels: set[str],
                            min_gain=st.min_relative_gain, max_delta_bic=st.max_delta_bic)
 
 
+#: Another form of a named effect is told apart from the named one when the held-out runs
+#: prefer one of them by this much BIC or more (Kass and Raftery's "very strong") ...
+FORM_BIC_DECISIVE = 10.0
+#: ... or by at least this much ("positive") while the two forms' held-out predictions differ
+#: by this multiple of the measurement-noise floor (RMS) or more. Else the record cannot tell
+#: them apart and both are reported: with thousands of nearly white samples a BIC difference of
+#: 4-6 came from held-out errors 0.5-1.5 % apart, a clean-room tanh stop against a cubic
+#: softening, or a 400 s exponential creep against a linear one, on an 80 s record.
+FORM_BIC_MARGIN = 2.0
+FORM_APART_NOISE = 0.5
+
+
+def compare_forms(chosen: dict[str, Any], base_factory: BaseFactory, groups: Sequence[Group],
+                  terms: dict[str, list[Term]], before: Evaluation, n_eff: float,
+                  load_cells: dict[str, Any], st: WorkflowSettings, *, noise_floor: float,
+                  switch: bool = True) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Each other reported form of the ``chosen`` effect fitted in its place (its grid points
+    only, the same earlier ``terms``) and judged on the held-out runs against ``before``.
+
+    The identification fit chose the form; the held-out runs judge it, as they judge the
+    effect. Two forms are told apart when the held-out runs prefer one by
+    :data:`FORM_BIC_MARGIN` or more *and* their held-out predictions differ by
+    :data:`FORM_APART_NOISE` x the noise floor (``noise_floor``) or more; else they are not
+    separable. With ``switch``, a form the held-out runs tell apart as better (and that clears
+    the acceptance bar) is taken instead: on a Bouc-Wen loop with a soft stop the
+    identification run preferred a hard stop, which predicted the held-out runs 15 BIC worse
+    than the soft one. Returns the score of the form taken and ``{"named", "forms": {form:
+    {heldout_rmse_after, delta_bic_vs_named, prediction_apart_over_noise}},
+    "not_separable": [named, forms not told apart...] or []}``. Where the load cells
+    corroborate the effect's claim, only the forms that make it are compared (the chosen one
+    was chosen among them)."""
+    eff = CANDIDATES[chosen["name"]]
+
+    def label(g: Any) -> str:
+        f = eff.form(g)
+        return eff.labels.get(f, f)
+
+    first = _majority(_forms(chosen["name"], chosen["models"], groups))
+    others = [f for f in dict.fromkeys(label(g) for g in eff.grid(groups[0].ident))
+              if f != first]
+    if load_cells.get("corroborated"):
+        others = [f for f in others if eff.claims({f})]
+
+    def score(form: str) -> dict[str, Any]:
+        one = only_forms(eff, lambda g: label(g) == form)
+        return score_candidate(one, base_factory, groups, terms, before, n_eff, load_cells,
+                               joint_retune=st.joint_retune)
+
+    scored = {first: chosen}
+    for form, s in zip(others, map_ordered(score, others, workers=st.workers,
+                                           expected=(HysteresisError,)), strict=True):
+        if not isinstance(s, BaseException):
+            scored[form] = s
+    held = [r.run_id for g in groups for r in g.heldout]
+
+    def apart(a: dict[str, Any], b: dict[str, Any]) -> float:
+        """RMS difference of two fits' held-out predictions, in noise floors."""
+        d = np.concatenate([a["after"].held_pred[k] - b["after"].held_pred[k] for k in held])
+        return _rmse(d) / max(noise_floor, 1e-300)
+
+    def told_apart(d_bic: float, d_pred: float) -> bool:
+        return d_bic >= FORM_BIC_DECISIVE or (d_bic >= FORM_BIC_MARGIN
+                                              and d_pred >= FORM_APART_NOISE)
+
+    named = first
+    if switch:
+        best = min(scored, key=lambda f: scored[f]["heldout_rmse_after"])
+        if (told_apart(-delta_bic(chosen["heldout_rmse_after"],
+                                  scored[best]["heldout_rmse_after"], 0, n_eff),
+                       apart(scored[best], chosen))
+                and _accept(scored[best], st)):
+            named = best
+    h_named = scored[named]["heldout_rmse_after"]
+    out = {f: {"heldout_rmse_after": s["heldout_rmse_after"],
+               "delta_bic_vs_named": delta_bic(h_named, s["heldout_rmse_after"], 0, n_eff),
+               "prediction_apart_over_noise": apart(s, scored[named])}
+           for f, s in scored.items() if f != named}
+    ties = [f for f, v in out.items()
+            if not told_apart(abs(v["delta_bic_vs_named"]), v["prediction_apart_over_noise"])]
+    info = {"named": named, "chosen_on_identification": first, "forms": out,
+            "not_separable": [named, *ties] if ties else []}
+    return scored[named], info
+
+
+def _majority(forms: Mapping[str, str]) -> str:
+    values = list(forms.values())
+    return max(set(values), key=values.count)
+
+
 def _effect_entry(chosen: dict[str, Any], added: Sequence[dict[str, Any]], k: int,
                   scores: Sequence[dict[str, Any]], loc: dict[str, Any], groups: Sequence[Group],
-                  current: Evaluation, model_error: dict[str, FloatArray] | None
-                  ) -> dict[str, Any]:
+                  current: Evaluation, model_error: dict[str, FloatArray] | None,
+                  form_comparison: dict[str, Any] | None = None) -> dict[str, Any]:
     """The report's entry for an added effect (``chosen``, the ``k``-th of ``added`` this
-    round): its evidence, the form each configuration took and the errors before and after."""
+    round): its evidence, the form each configuration took, the forms the held-out runs cannot
+    tell from it (:func:`compare_forms`) and the errors before and after."""
     eff = CANDIDATES[chosen["name"]]
     evidence = {
         "signature": eff.signature,
@@ -621,9 +727,14 @@ def _effect_entry(chosen: dict[str, Any], added: Sequence[dict[str, Any]], k: in
             model_error, groups, current, chosen["after"])
     forms = _forms(chosen["name"], chosen["models"], groups)
     evidence["form_per_configuration"] = forms
+    if form_comparison is not None:
+        evidence["form_comparison"] = form_comparison["forms"]
+        evidence["form_chosen_on_identification"] = form_comparison["chosen_on_identification"]
     return {
         "name": chosen["name"],
-        "form": max(set(forms.values()), key=list(forms.values()).count),
+        "form": _majority(forms),
+        # the forms the held-out runs cannot tell from the named one (itself first), or []
+        "forms_not_separable": (form_comparison or {}).get("not_separable", []),
         "evidence": evidence,
         "rmse_before": chosen["rmse_before"],
         "rmse_after": chosen["rmse_after"],
