@@ -223,20 +223,26 @@ def score_answer(report: dict[str, Any], hidden: tuple[str, str] | None,
     """One source's answer against its truth: ``hit`` (identifiable: the hidden effect named
     first with its form and the held-out RMSE at least halved against the best plain family;
     not identifiable: the class answer holds the effect, or the base absorbs it and the
-    verdict is clean; clean: nothing named), ``name_hit`` (the name alone)."""
+    verdict is clean; clean: nothing named), ``name_hit`` (the name alone). The form counts
+    when it is the one named or among the forms the report calls not separable from it on
+    the held-out runs; ``single_form_hit`` asks for it named alone."""
     named = [(e["name"], e.get("form")) for e in report["effects"]]
     ident = report.get("identifiability") or {}
     cut = float(report["summary"].get("heldout_reduction_vs_best_plain",
                                       report["summary"]["heldout_reduction"]))
     if hidden is None:
-        return {"hit": not named, "name_hit": not named}
+        return {"hit": not named, "name_hit": not named, "single_form_hit": not named}
     first = named[0] if named else None
     name_hit = bool(first and first[0] == hidden[0])
     if identifiable:
-        return {"hit": bool(first == hidden and cut >= 0.5), "name_hit": name_hit}
+        ties = report["effects"][0].get("forms_not_separable") or [] if named else []
+        in_forms = bool(name_hit and (first == hidden or hidden[1] in ties))
+        return {"hit": bool(in_forms and cut >= 0.5), "name_hit": name_hit,
+                "single_form_hit": bool(first == hidden and len(ties) < 2 and cut >= 0.5)}
     in_class = hidden[0] in (ident.get("class") or [])
     absorbed = not named and report["verdict"] == "no_missing_effect"
-    return {"hit": bool(in_class or absorbed), "name_hit": name_hit}
+    return {"hit": bool(in_class or absorbed), "name_hit": name_hit,
+            "single_form_hit": bool(in_class or absorbed)}
 
 
 def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None = None,
@@ -340,6 +346,9 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
         "identifiable": len(ident),
         "identifiable_named_first_and_halved": sum(v["hit"] for v in ident),
         "identifiable_name_first": sum(v["name_hit"] for v in ident),
+        # the form named alone: no other form within the held-out margin
+        "identifiable_single_form_and_halved": sum(v.get("single_form_hit", v["hit"])
+                                                   for v in ident),
         "non_identifiable": len(non),
         "non_identifiable_class_or_absorbed": sum(v["hit"] for v in non),
         "clean": len(clean), "effects_named_on_clean": sum(len(v["named"]) > 0 for v in clean),
