@@ -4,6 +4,7 @@ format specification alone, by sessions that had not read the implementation the
 from __future__ import annotations
 
 import importlib.util
+import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -16,5 +17,7 @@ def load(name: str) -> ModuleType:
     spec = importlib.util.spec_from_file_location(f"cleanroom_{name}", HERE / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
+    # registered before it runs: a dataclass looks its module up by name while it is made
+    sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
