@@ -200,6 +200,8 @@ class RateDependence(Effect):
         "relaxation": ("output", 1, False), "lag": ("output", 1, True),
         "slip": ("input", 0, False)}
     labels: ClassVar[dict[str, str]] = {"lag": "relaxation", "slip": "speed_friction"}
+    #: sign(v) |v / v_top|^a with a = 1 is the viscous term
+    nests: ClassVar[dict[str, str]] = {"power": "viscous"}
 
     def grid(self, ident: RunData) -> list[Any]:
         vmax = float(np.percentile(np.abs(ident.v), 99))
