@@ -326,6 +326,12 @@ def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None 
     return out
 
 
+def _plain_over_noise(row: dict[str, Any]) -> float:
+    """The best plain family's held-out RMSE over the noise floor, from the answer's."""
+    kept = 1.0 - float(row["heldout_reduction_vs_best_plain"])
+    return float(row["rmse_over_noise"]) / kept if kept > 0 else float("inf")
+
+
 def summarise(rows: dict[str, Any]) -> dict[str, Any]:
     """The matrix's figures: identifiable sources named first (name and form) and halved,
     non-identifiable ones answered with their class (or absorbed and clean), effects named
@@ -335,6 +341,7 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
     non = [v for v in vals if v["hidden"] and not v["identifiable"]]
     clean = [v for v in vals if not v["hidden"]]
     by_base = [v for v in vals if v.get("first_by_base")]
+    halvable = [v for v in ident if _plain_over_noise(v) >= 2.0]
     return {
         "sources": len(vals), "max_seconds": max((v["seconds"] for v in vals), default=0.0),
         "over_60_s": sum(v["seconds"] > 60 for v in vals),
@@ -349,6 +356,10 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
         # the form named alone: no other form within the held-out margin
         "identifiable_single_form_and_halved": sum(v.get("single_form_hit", v["hit"])
                                                    for v in ident),
+        # halving needs the best plain family at 2x the noise floor or more: below it the
+        # halved RMSE would lie under the noise
+        "identifiable_halvable": len(halvable),
+        "identifiable_halvable_named_first_and_halved": sum(v["hit"] for v in halvable),
         "non_identifiable": len(non),
         "non_identifiable_class_or_absorbed": sum(v["hit"] for v in non),
         "clean": len(clean), "effects_named_on_clean": sum(len(v["named"]) > 0 for v in clean),
