@@ -1,0 +1,38 @@
+"""The discrepancy bench's scoring of one answer against its truth (pure: a report in, a dict
+out): a form counts when it is named or among the forms the report cannot tell apart."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from bench.bench_discrepancy import score_answer, summarise
+
+
+def _report(named: list[tuple[str, str, list[str]]], cut: float) -> dict[str, Any]:
+    return {"effects": [{"name": n, "form": f, "forms_not_separable": ties}
+                        for n, f, ties in named],
+            "identifiability": None, "verdict": "missing_effects_found" if named else "clean",
+            "summary": {"heldout_reduction": cut, "heldout_reduction_vs_best_plain": cut}}
+
+
+def test_a_form_among_the_inseparable_ones_counts_but_not_as_a_single_form() -> None:
+    tie = _report([("drift", "linear", ["linear", "exponential"])], 0.8)
+    got = score_answer(tie, ("drift", "exponential"), True)
+    assert got == {"hit": True, "name_hit": True, "single_form_hit": False}
+    alone = _report([("drift", "exponential", [])], 0.8)
+    assert score_answer(alone, ("drift", "exponential"), True)["single_form_hit"] is True
+    wrong = _report([("drift", "linear", [])], 0.8)
+    assert score_answer(wrong, ("drift", "exponential"), True)["hit"] is False
+    short = _report([("drift", "exponential", [])], 0.4)  # not halved
+    assert score_answer(short, ("drift", "exponential"), True)["hit"] is False
+
+
+def test_only_sources_with_room_to_halve_count_as_halvable() -> None:
+    def row(over: float, cut: float, hit: bool) -> dict[str, Any]:
+        return {"hidden": ["drift", "linear"], "identifiable": True, "named": [],
+                "hit": hit, "name_hit": hit, "seconds": 1.0, "cpu_seconds": 1.0,
+                "rmse_over_noise": over, "heldout_reduction_vs_best_plain": cut}
+    # plain 3x the noise (1.5 after a 50 % cut) has room; plain 1.6x does not
+    out = summarise({"a": row(1.5, 0.5, True), "b": row(1.6, 0.0, False)})
+    assert out["identifiable"] == 2 and out["identifiable_halvable"] == 1
+    assert out["identifiable_halvable_named_first_and_halved"] == 1
