@@ -1390,6 +1390,17 @@ def _screen_of(base_factory: BaseFactory, ident: RunData) -> BaseFactory | None:
     return None
 
 
+def screened_sse(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect,
+                 ident: RunData, *, iterations: int = 8) -> float | None:
+    """The identification SSE of ``effect`` added to ``fixed`` on a slow base's screening
+    base (the search :func:`fit_joint` makes before it refits the real base), or None for a
+    base fast enough to search itself."""
+    screen = _screen_of(base_factory, ident)
+    if screen is None:
+        return None
+    return _sse(fit_joint(screen, fixed, effect, ident, iterations=iterations), ident)
+
+
 def _searching(base_factory: BaseFactory) -> BaseFactory:
     """The factory a search fits: a screened factory's real base, unwrapped."""
     return base_factory.base if isinstance(base_factory, ScreenedFactory) else base_factory

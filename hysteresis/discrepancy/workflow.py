@@ -34,6 +34,7 @@ from hysteresis.discrepancy._ops import FloatArray
 from hysteresis.discrepancy.effects import (
     CANDIDATES,
     EFFECT_NAMES,
+    FORM_ON_BASE_FACTOR,
     BaseFactory,
     ComposedModel,
     Effect,
@@ -43,6 +44,7 @@ from hysteresis.discrepancy.effects import (
     fit_with_effect,
     memoised_fits,
     only_forms,
+    screened_sse,
 )
 from hysteresis.discrepancy.evidence import corroboration, tension_speed_share
 from hysteresis.discrepancy.identifiability import force_statement, statement
@@ -647,10 +649,17 @@ def compare_forms(chosen: dict[str, Any], base_factory: BaseFactory, groups: Seq
     if load_cells.get("corroborated"):
         others = [f for f in others if eff.claims({f})]
 
+    def only(form: str) -> Effect:
+        return only_forms(eff, lambda g: label(g) == form)
+
+    single = {f: only(f) for f in [first, *others]}
+
+    by_screen = _apart_on_screen(single, first, others, base_factory, groups, terms)
+    others = [f for f in others if f not in by_screen]
+
     def score(form: str) -> dict[str, Any]:
-        one = only_forms(eff, lambda g: label(g) == form)
-        return score_candidate(one, base_factory, groups, terms, before, n_eff, load_cells,
-                               joint_retune=st.joint_retune)
+        return score_candidate(single[form], base_factory, groups, terms, before, n_eff,
+                               load_cells, joint_retune=st.joint_retune)
 
     scored = {first: chosen}
     for form, s in zip(others, map_ordered(score, others, workers=st.workers,
@@ -688,9 +697,36 @@ def compare_forms(chosen: dict[str, Any], base_factory: BaseFactory, groups: Seq
            for f, s in scored.items() if f != named}
     ties = [f for f, v in out.items()
             if not told_apart(abs(v["delta_bic_vs_named"]), v["prediction_apart_over_noise"])]
+    out.update({f: {"screened_identification_sse_ratio": r} for f, r in by_screen.items()})
     info = {"named": named, "chosen_on_identification": first, "forms": out,
             "not_separable": [named, *ties] if ties else []}
     return scored[named], info
+
+
+def _apart_on_screen(single: Mapping[str, Effect], first: str, others: Sequence[str],
+                     base_factory: BaseFactory, groups: Sequence[Group],
+                     terms: dict[str, list[Term]]) -> dict[str, float]:
+    """The forms (of ``others``) a slow base's screening base fits more than
+    ``FORM_ON_BASE_FACTOR`` worse on the identification runs than ``first``, with that SSE
+    ratio; {} for a base fast enough to search itself.
+
+    A slow base refits for every form compared (seconds each); forms that far apart are told
+    apart on the screen, as the search itself does (a Bouc-Wen base's hard stop and cubic
+    softening cost 3.5 s of a 60 s source)."""
+    def screened(form: str) -> float | None:
+        sses = [screened_sse(base_factory, terms.get(g.key, []), single[form], g.ident)
+                for g in groups]
+        return None if any(x is None for x in sses) else float(sum(x or 0.0 for x in sses))
+
+    own = screened(first) if others else None
+    if own is None:
+        return {}
+    out = {}
+    for f in others:
+        alt = screened(f)
+        if alt is not None and alt > FORM_ON_BASE_FACTOR * own:
+            out[f] = alt / max(own, 1e-300)
+    return out
 
 
 def _majority(forms: Mapping[str, str]) -> str:
