@@ -89,6 +89,14 @@ class Effect:
             return theta[0]
         return self.first_form
 
+    def label(self, form: str) -> str:
+        """The name form tag ``form`` is reported under."""
+        return self.labels.get(form, form)
+
+    def reported_form(self, theta: Any) -> str:
+        """The physical form ``theta`` stands for, as reported."""
+        return self.label(self.form(theta))
+
     def _spec(self, theta: Any) -> tuple[str, int, bool] | None:
         return self.forms.get(self.form(theta)) if self.form(theta) != self.first_form \
             else None
@@ -662,8 +670,7 @@ class Term:
     @property
     def form(self) -> str:
         """The physical form, as reported."""
-        f = self.effect.form(self.theta)
-        return self.effect.labels.get(f, f)
+        return self.effect.reported_form(self.theta)
 
     @property
     def side(self) -> str:
@@ -1245,8 +1252,7 @@ def _only_form(effect: Effect, form: str) -> Effect:
 @cache  # one copy per candidate: the fits memoised for it are found again in later rounds
 def claiming(effect: Effect) -> Effect:
     """``effect`` searched over the forms that make its load-cell claim only."""
-    return only_forms(effect, lambda g: effect.claims({effect.labels.get(effect.form(g),
-                                                                          effect.form(g))}))
+    return only_forms(effect, lambda g: effect.claims({effect.reported_form(g)}))
 
 
 #: The forms the real base is fitted with: the screen's choice and every form whose best

@@ -41,7 +41,7 @@ def library(run: RunData, y_base: FloatArray, names: Sequence[str]
                 continue
             f = eff.form(theta)
             for j in range(phi.shape[1]):
-                cols.append((name, eff.labels.get(f, f), theta, phi[:, j]))
+                cols.append((name, eff.label(f), theta, phi[:, j]))
     return cols
 
 

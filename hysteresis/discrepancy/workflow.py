@@ -627,30 +627,27 @@ def compare_forms(chosen: dict[str, Any], base_factory: BaseFactory, groups: Seq
 
     The identification fit chose the form; the held-out runs judge it, as they judge the
     effect. Two forms are told apart when the held-out runs prefer one by
-    :data:`FORM_BIC_MARGIN` or more *and* their held-out predictions differ by
-    :data:`FORM_APART_NOISE` x the noise floor (``noise_floor``) or more; else they are not
-    separable. With ``switch``, a form the held-out runs tell apart as better (and that clears
-    the acceptance bar) is taken instead: on a Bouc-Wen loop with a soft stop the
-    identification run preferred a hard stop, which predicted the held-out runs 15 BIC worse
-    than the soft one. Returns the score of the form taken and ``{"named", "forms": {form:
-    {heldout_rmse_after, delta_bic_vs_named, prediction_apart_over_noise}},
-    "not_separable": [named, forms not told apart...] or []}``. Where the load cells
-    corroborate the effect's claim, only the forms that make it are compared (the chosen one
+    :data:`FORM_BIC_DECISIVE` or more, or by :data:`FORM_BIC_MARGIN` or more while their
+    held-out predictions differ by :data:`FORM_APART_NOISE` x the noise floor
+    (``noise_floor``) or more; else they are not separable. With ``switch``, a form the
+    held-out runs tell apart as better (and that clears the acceptance bar) is taken
+    instead: on a Bouc-Wen loop with a soft stop the identification run preferred a hard
+    stop, which predicted the held-out runs 15 BIC worse than the soft one. Returns the score
+    of the form taken and ``{"named", "forms": {form: {heldout_rmse_after,
+    delta_bic_vs_named, prediction_apart_over_noise}}, "not_separable": [named, forms not
+    told apart...] or []}``. Where the load cells corroborate the effect's claim, only the
+    forms that make it are compared (the chosen one
     was chosen among them)."""
     eff = CANDIDATES[chosen["name"]]
 
-    def label(g: Any) -> str:
-        f = eff.form(g)
-        return eff.labels.get(f, f)
-
     first = _majority(_forms(chosen["name"], chosen["models"], groups))
-    others = [f for f in dict.fromkeys(label(g) for g in eff.grid(groups[0].ident))
+    others = [f for f in dict.fromkeys(eff.reported_form(g) for g in eff.grid(groups[0].ident))
               if f != first]
     if load_cells.get("corroborated"):
         others = [f for f in others if eff.claims({f})]
 
     def only(form: str) -> Effect:
-        return only_forms(eff, lambda g: label(g) == form)
+        return only_forms(eff, lambda g: eff.reported_form(g) == form)
 
     single = {f: only(f) for f in [first, *others]}
 
@@ -680,16 +677,14 @@ def compare_forms(chosen: dict[str, Any], base_factory: BaseFactory, groups: Seq
     # a form that contains the named one as a limit is not taken in its place: the
     # identification fit chose the limit, and the held-out runs' preference for the freer form
     # came from its freedom (a viscous damper on the Bouc-Wen plant: |v|^0.93, 18 BIC)
-    nesting = {eff.labels.get(t, t) for t, simpler in eff.nests.items()
-               if eff.labels.get(simpler, simpler) == first}
+    nesting = {eff.label(t) for t, simpler in eff.nests.items() if eff.label(simpler) == first}
     named = first
-    if switch:
-        best = min(scored, key=lambda f: scored[f]["heldout_rmse_after"])
-        if (best not in nesting and told_apart(-delta_bic(chosen["heldout_rmse_after"],
-                                  scored[best]["heldout_rmse_after"], 0, n_eff),
-                       apart(scored[best], chosen))
-                and _accept(scored[best], st)):
-            named = best
+    best = min(scored, key=lambda f: scored[f]["heldout_rmse_after"])
+    gain_bic = -delta_bic(chosen["heldout_rmse_after"], scored[best]["heldout_rmse_after"], 0,
+                          n_eff)
+    if (switch and best not in nesting and told_apart(gain_bic, apart(scored[best], chosen))
+            and _accept(scored[best], st)):
+        named = best
     h_named = scored[named]["heldout_rmse_after"]
     out = {f: {"heldout_rmse_after": s["heldout_rmse_after"],
                "delta_bic_vs_named": delta_bic(h_named, s["heldout_rmse_after"], 0, n_eff),
