@@ -7,6 +7,7 @@ import importlib.util
 import sys
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 HERE = Path(__file__).resolve().parent
 
@@ -21,3 +22,13 @@ def load(name: str) -> ModuleType:
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def stage_runs(source: Path, work: Path) -> list[Any]:
+    """A clean-room source of three runs ingested and read as the discrepancy stage does (the
+    decaying sine identifies, 25 Hz); nothing may be rejected."""
+    from pipelines.discrepancy_data import ingest_source, runs_from_dataset
+
+    rows, meta, rep = ingest_source(source, work)
+    assert rep["rejected"] == [] and len(meta) == 3
+    return runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)

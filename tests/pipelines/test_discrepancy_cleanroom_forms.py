@@ -12,8 +12,7 @@ import pytest
 
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
-from pipelines.discrepancy_data import ingest_source, runs_from_dataset
-from tests.cleanroom import load
+from tests.cleanroom import load, stage_runs
 
 
 @pytest.mark.slow
@@ -26,9 +25,7 @@ def test_a_cubic_softening_the_record_cannot_tell_from_a_tanh_stop_is_named_with
     verdicts = {f: v["verdict"] for f, v in truth["alternatives"].items()}
     assert verdicts["soft_tanh"] == "indistinguishable"
     assert verdicts["hard_clip"] != "indistinguishable"
-    rows, meta, rep = ingest_source(tmp_path / name, tmp_path / "work")
-    assert rep["rejected"] == [] and len(meta) == 3
-    runs = runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)
+    runs = stage_runs(tmp_path / name, tmp_path / "work")
     out, _ = analyse(runs, auto_families=stage_auto_families,
                      settings=WorkflowSettings(max_effects=1))
     first = out["effects"][0]

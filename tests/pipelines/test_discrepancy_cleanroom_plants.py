@@ -14,8 +14,7 @@ import pytest
 
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
-from pipelines.discrepancy_data import ingest_source, runs_from_dataset
-from tests.cleanroom import load
+from tests.cleanroom import load, stage_runs
 
 #: The base (as ``auto_families.gamma_free``): free play weights with an offset, start fitted.
 BASE = {"constraint": "free", "fit_offset": True}
@@ -32,9 +31,7 @@ def test_a_loading_gain_that_turns_over_along_a_travel_is_named_with_its_width(
     truth = generator.write_source(tmp_path, "maxwell_slip", "asymmetry",
                                    "loading_unloading_gain")
     src = tmp_path / truth["source"]
-    rows, meta, rep = ingest_source(src, tmp_path / "work")
-    assert rep["rejected"] == [] and len(meta) == 3
-    runs = runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)
+    runs = stage_runs(src, tmp_path / "work")
     out, _ = analyse(runs, base_family="gamma", base_params=BASE, auto_families={},
                      base_check=False, settings=WorkflowSettings(max_effects=1))
     first = out["effects"][0]

@@ -12,8 +12,7 @@ import pytest
 
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
-from pipelines.discrepancy_data import ingest_source, runs_from_dataset
-from tests.cleanroom import load
+from tests.cleanroom import load, stage_runs
 
 #: The base (as ``auto_families.gamma_free``): free play weights with an offset, start fitted.
 BASE = {"constraint": "free", "fit_offset": True}
@@ -30,9 +29,8 @@ def generator() -> Any:
 def test_a_rate_form_of_a_foreign_generator_is_named_and_halved(
         generator: Any, tmp_path: Path, case: str, form: str) -> None:
     truth = generator.write_source(tmp_path / "src", "play_sum", case)
-    rows, meta, rep = ingest_source(tmp_path / "src", tmp_path / "work")
-    assert rep["rejected"] == [] and len(meta) == len(truth["runs"]) == 3
-    runs = runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)
+    assert len(truth["runs"]) == 3
+    runs = stage_runs(tmp_path / "src", tmp_path / "work")
     out, _ = analyse(runs, base_family="gamma", base_params=BASE, auto_families={},
                      base_check=False, settings=WorkflowSettings(max_effects=1))
     first = out["effects"][0]
@@ -48,8 +46,7 @@ def test_runs_recorded_one_after_another_are_judged_from_the_state_they_were_lef
     # own start, the clean plant's held-out runs sit 0.1-0.25 mm off (15-35x the noise) and a
     # term that reads the tension was named to explain it
     generator.write_source(tmp_path / "src", "play_sum", "clean")
-    rows, meta, _ = ingest_source(tmp_path / "src", tmp_path / "work")
-    runs = runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)
+    runs = stage_runs(tmp_path / "src", tmp_path / "work")
     out, _ = analyse(runs, base_family="gamma", base_params=BASE, auto_families={},
                      base_check=False, settings=WorkflowSettings(max_effects=1))
     hist = out["run_history"]

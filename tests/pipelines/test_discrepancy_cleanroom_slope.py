@@ -13,8 +13,7 @@ import pytest
 
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
-from pipelines.discrepancy_data import ingest_source, runs_from_dataset
-from tests.cleanroom import load
+from tests.cleanroom import load, stage_runs
 
 
 @pytest.mark.slow
@@ -24,9 +23,7 @@ def test_a_backlash_with_different_slopes_is_named_a_loading_gain_with_its_slope
     folder = Path(generator.write_source(tmp_path, "play_sum", "slope_backlash", "weak"))
     truth = json.loads((tmp_path / "slope_backlash_truth.json").read_text())
     g = truth[folder.name]["parameters"]["effect"]["g"]
-    rows, meta, rep = ingest_source(folder, tmp_path / "work")
-    assert rep["rejected"] == [] and len(meta) == 3
-    runs = runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)
+    runs = stage_runs(folder, tmp_path / "work")
     # the stage's defaults: the base chosen among the plain families
     out, _ = analyse(runs, auto_families=stage_auto_families,
                      settings=WorkflowSettings(max_effects=1))

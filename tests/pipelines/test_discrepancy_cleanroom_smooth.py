@@ -14,8 +14,7 @@ import pytest
 
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
-from pipelines.discrepancy_data import ingest_source, runs_from_dataset
-from tests.cleanroom import load
+from tests.cleanroom import load, stage_runs
 
 #: The generator's seed of this source in its own matrix (``write_all``).
 SEED = 1002
@@ -29,9 +28,7 @@ def test_a_relaxing_reading_on_a_bouc_wen_plant_is_named_with_its_form_and_time(
                                          "relaxation", "rest", SEED))
     truth = json.loads((tmp_path / "smooth_plants_truth.json").read_text())
     params = truth["sources"][folder.name]["params"]
-    rows, meta, rep = ingest_source(folder, tmp_path / "work")
-    assert rep["rejected"] == [] and len(meta) == 3
-    runs = runs_from_dataset(rows, meta, identify_excitations=["sine_decay"], rate_hz=25.0)
+    runs = stage_runs(folder, tmp_path / "work")
     out, _ = analyse(runs, base_family="bouc_wen", auto_families={}, base_check=False,
                      settings=WorkflowSettings(max_effects=1))
     first = out["effects"][0]
