@@ -123,6 +123,12 @@ class Effect:
         """Grid points of the forms other than the first (``(form, ...)`` tuples)."""
         return []
 
+    def compare_grid(self, ident: RunData) -> list[Any]:
+        """Grid points of forms the search does not try but the held-out runs judge once the
+        effect is named (a form that clean records hold too, so that searched it names the
+        effect where there is none)."""
+        return []
+
     def delayed(self, run: RunData, theta: Any) -> RunData:
         """The run as the model sees it with this term: channels made late by a latency
         (identity for every other term)."""
@@ -308,8 +314,12 @@ class TendonElongation(Effect):
     #: reading (reported as square_input): c (T_in^2 - T_in(0)^2) on the reading itself, a
     #: stretch by the input tension's square between the friction and the output's sensor
     #: (the friction does not hold it back).
+    #: linear_input (compared only, :meth:`compare_grid`): input travel u - c s (T_in -
+    #: T_in(0)) / T_top, a spring linear in the input tension ahead of the sheath. Once a
+    #: stretch is named, the held-out runs judge it against the square law.
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
-        "square_output": ("output", 1, False), "reading": ("output", 1, False)}
+        "square_output": ("output", 1, False), "reading": ("output", 1, False),
+        "linear_input": ("input", 0, False)}
     labels: ClassVar[dict[str, str]] = {"reading": "square_input"}
     #: Play thresholds averaged over the friction path (the profile's quadrature).
     n_profile = 8
@@ -336,6 +346,11 @@ class TendonElongation(Effect):
         if ident.tension_out is not None:
             out += [("square_output", 0.0)]
         return out
+
+    def compare_grid(self, ident: RunData) -> list[Any]:
+        # c: stretch at the largest tension, a fraction of the input span (refined)
+        span = float(np.ptp(ident.u))
+        return [("linear_input", c * span) for c in (0.01, 0.03, 0.08, 0.17, 0.35)]
 
     def features(self, run: RunData, theta: Any, y_base: FloatArray, ctx: Ctx) -> FloatArray:
         form = theta[0]
@@ -389,6 +404,12 @@ class TendonElongation(Effect):
 
     def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
                         friction: FloatArray | None = None) -> FloatArray:
+        if self.form(theta) == "linear_input":
+            if run.tension is None:
+                raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension "
+                                      "channel")
+            stretch = float(theta[-1]) * (run.tension - run.tension[0]) / ctx["tension_top"]
+            return np.asarray(u - ctx["pull_sign"] * stretch, dtype=np.float64)
         big_r, w, c = theta
         stretch = c * self.profile(run, big_r, w, ctx, friction=friction)
         return np.asarray(u - ctx["pull_sign"] * stretch, dtype=np.float64)
@@ -398,7 +419,8 @@ class TendonElongation(Effect):
         # Floor for the log: a slack tendon reads ~0 N (load-cell noise may go negative).
         floor = max(0.02 * float(np.percentile(np.abs(t), 99)), 1e-6)
         lt = np.log(np.maximum(t, floor))
-        return {"tension_scale": max(float(np.max(t**2)), 1e-12), "t_floor": floor,
+        return {"tension_scale": max(float(np.max(t**2)), 1e-12),
+                "tension_top": max(float(np.max(np.abs(t))), 1e-12), "t_floor": floor,
                 "log_span": max(float(np.ptp(lt)), 1e-9), "pull_sign": ident.pull_sign}
 
 
@@ -1234,12 +1256,15 @@ def _prefer_nested(effect: Effect, grid: Sequence[Any], fits: Sequence[ComposedM
 FORM_REFINE_FACTOR = 1.25
 
 
-def only_forms(effect: Effect, keep: Callable[[Any], bool]) -> Effect:
-    """``effect`` searched over the grid points ``keep`` accepts only (a shallow copy)."""
+def only_forms(effect: Effect, keep: Callable[[Any], bool], *,
+               compared: bool = False) -> Effect:
+    """``effect`` searched over the grid points ``keep`` accepts only (a shallow copy); with
+    ``compared``, among them the compared-only forms (:meth:`Effect.compare_grid`)."""
     one = copy.copy(effect)
-    grid, operator_grid = effect.grid, effect.operator_grid
+    grid, operator_grid, extra = effect.grid, effect.operator_grid, effect.compare_grid
     vars(one).update(
-        grid=lambda ident: [g for g in grid(ident) if keep(g)],
+        grid=lambda ident: [g for g in [*grid(ident), *(extra(ident) if compared else [])]
+                            if keep(g)],
         operator_grid=lambda ident: [g for g in operator_grid(ident) if keep(g)])
     return one
 

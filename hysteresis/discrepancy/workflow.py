@@ -641,13 +641,15 @@ def compare_forms(chosen: dict[str, Any], base_factory: BaseFactory, groups: Seq
     eff = CANDIDATES[chosen["name"]]
 
     first = _majority(_forms(chosen["name"], chosen["models"], groups))
-    others = [f for f in dict.fromkeys(eff.reported_form(g) for g in eff.grid(groups[0].ident))
+    ident = groups[0].ident
+    others = [f for f in dict.fromkeys(eff.reported_form(g)
+                                       for g in [*eff.grid(ident), *eff.compare_grid(ident)])
               if f != first]
     if load_cells.get("corroborated"):
         others = [f for f in others if eff.claims({f})]
 
     def only(form: str) -> Effect:
-        return only_forms(eff, lambda g: eff.reported_form(g) == form)
+        return only_forms(eff, lambda g: eff.reported_form(g) == form, compared=True)
 
     single = {f: only(f) for f in [first, *others]}
 

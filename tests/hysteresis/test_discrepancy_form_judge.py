@@ -85,3 +85,23 @@ def test_the_comparison_can_be_switched_off() -> None:
     first = rep["effects"][0]
     assert first["forms_not_separable"] == []
     assert "form_comparison" not in first["evidence"]
+
+
+@pytest.mark.parametrize(("hidden", "form"), [
+    ("tendon_elongation:linear_input", "linear_input"),
+    ("tendon_elongation", "square_input"),
+])
+def test_a_stretch_is_judged_linear_or_square_on_the_held_out_runs(hidden: str,
+                                                                   form: str) -> None:
+    # the search tries the square law only (a linear spring is in every clean record); once
+    # a stretch is named, the held-out runs judge the linear law against it
+    rep = run_workflow(injected_runs("gamma", {hidden: 2.0}), base_factory_for("gamma"),
+                       base_name="gamma")
+    first = rep["effects"][0]
+    assert (first["name"], first["form"]) == ("tendon_elongation", form)
+    other = "square_input" if form == "linear_input" else "linear_input"
+    assert first["evidence"]["form_comparison"][other]["delta_bic_vs_named"] >= \
+        FORM_BIC_DECISIVE
+    assert first["forms_not_separable"] == []
+    stretch, ident = CANDIDATES["tendon_elongation"], injected_runs("gamma", {})[0]
+    assert "linear_input" not in {stretch.form(g) for g in stretch.grid(ident)}
