@@ -36,3 +36,19 @@ def test_only_sources_with_room_to_halve_count_as_halvable() -> None:
     out = summarise({"a": row(1.5, 0.5, True), "b": row(1.6, 0.0, False)})
     assert out["identifiable"] == 2 and out["identifiable_halvable"] == 1
     assert out["identifiable_halvable_named_first_and_halved"] == 1
+
+
+def test_room_to_halve_is_also_read_against_the_plants_clean_floor() -> None:
+    def row(plant: str, over: float, cut: float, hit: bool, *, clean: bool = False
+            ) -> dict[str, Any]:
+        return {"plant": plant, "start": "rest", "hidden": None if clean else ["drift", "linear"],
+                "identifiable": not clean, "named": [], "hit": hit, "name_hit": hit,
+                "seconds": 1.0, "cpu_seconds": 1.0, "rmse_over_noise": over,
+                "heldout_reduction_vs_best_plain": cut}
+    # the plant's base leaves 1.5x the noise on its clean source: a plain fit at 2.5x has
+    # room over the noise but not over that floor; one at 4x has room over both
+    out = summarise({"p:clean": row("p", 1.5, 0.0, True, clean=True),
+                     "p:a": row("p", 2.5, 0.0, False), "p:b": row("p", 2.0, 0.5, True)})
+    assert out["identifiable_halvable"] == 2
+    assert out["identifiable_halvable_over_clean_floor"] == 1
+    assert out["identifiable_halvable_over_clean_floor_named_first_and_halved"] == 1
