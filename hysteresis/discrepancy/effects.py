@@ -280,6 +280,12 @@ def speed(run: RunData) -> FloatArray:
     return v
 
 
+def _input_tension(run: RunData) -> FloatArray:
+    if run.tension is None:
+        raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
+    return run.tension
+
+
 class TendonElongation(Effect):
     name = "tendon_elongation"
     signature = (
@@ -368,19 +374,18 @@ class TendonElongation(Effect):
     def profile(self, run: RunData, big_r: float, w: float, ctx: Ctx, *,
                 friction: FloatArray | None = None) -> FloatArray:
         """The tendon's T^2 profile, from 0 at the run's start, per unit of the largest T^2."""
-        if run.tension is None:
-            raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension channel")
+        tension = _input_tension(run)
         if friction is not None:
-            return self._profile(run.tension, big_r, w, ctx, friction)
+            return self._profile(tension, big_r, w, ctx, friction)
         # The search refines the stretch c with (R, w) fixed: the profile does not depend on
         # c, so the last few are kept (keyed by the tension array itself, held alive here).
-        key = (id(run.tension), float(big_r), float(w), tuple(sorted(ctx.items())))
+        key = (id(tension), float(big_r), float(w), tuple(sorted(ctx.items())))
         hit = self._profiles.get(key)
-        if hit is not None and hit[0] is run.tension:
+        if hit is not None and hit[0] is tension:
             return hit[1]
-        out = self._profile(run.tension, big_r, w, ctx, None)
+        out = self._profile(tension, big_r, w, ctx, None)
         out.setflags(write=False)
-        self._profiles[key] = (run.tension, out)
+        self._profiles[key] = (tension, out)
         while len(self._profiles) > self.n_cached_profiles:
             self._profiles.pop(next(iter(self._profiles)))
         return out
@@ -405,10 +410,8 @@ class TendonElongation(Effect):
     def transform_input(self, run: RunData, u: FloatArray, theta: Any, ctx: Ctx, *,
                         friction: FloatArray | None = None) -> FloatArray:
         if self.form(theta) == "linear_input":
-            if run.tension is None:
-                raise HysteresisError(f"run {run.run_id}: tendon_elongation needs a tension "
-                                      "channel")
-            stretch = float(theta[-1]) * (run.tension - run.tension[0]) / ctx["tension_top"]
+            t = _input_tension(run)
+            stretch = float(theta[-1]) * (t - t[0]) / ctx["tension_top"]
             return np.asarray(u - ctx["pull_sign"] * stretch, dtype=np.float64)
         big_r, w, c = theta
         stretch = c * self.profile(run, big_r, w, ctx, friction=friction)
