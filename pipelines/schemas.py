@@ -317,6 +317,10 @@ class DiscrepancyConfig:
         "preisach": {},
         "bouc_wen": {},
         "coleman_hodgdon": {},
+        # plays whose widths follow the output tension (a follower whose load grows with its
+        # travel); ranked only on runs with output load cells, and only where it predicts 20 %
+        # better than every family above
+        "gamma_tension": {},
     })
     #: auto: the workflow runs on the best plain family and, while its answer is neither clean
     #: nor explained to within base_retry_factor x the noise floor, on the next best (up to

@@ -15,6 +15,7 @@ from scipy.optimize import nnls
 
 from hysteresis.base import HysteresisError, HysteresisModel, as_1d, check_pair
 from hysteresis.discrepancy._ops import FloatArray, play
+from hysteresis.gamma import GammaModel
 
 
 class PlaySumModel(HysteresisModel):
@@ -140,7 +141,26 @@ class FrozenShapeModel(HysteresisModel):
         return np.asarray(self.gain_ * self._shape(uu) + self.offset_, dtype=np.float64)
 
 
-LOCAL_BASES: dict[str, type[HysteresisModel]] = {"play_sum": PlaySumModel, "affine": AffineModel}
+class TensionWidthGamma(GammaModel):
+    """The Gamma play sum with every play's width in proportion to the output tension: the
+    capstan law on each play. The friction a tendon meets along its sheath grows with its
+    tension, and with it the input travel a reversal takes before the output follows; under a
+    follower whose load grows with its travel (a return spring) the loop widens along the
+    stroke, which plays of one width (or a Bouc-Wen loop) cannot draw.
+
+    The widths follow ``T_out / T_ref`` (``T_ref``: the identification run's median output
+    tension); the input tension is not used, as it jumps by the capstan ratio at every
+    reversal where the friction along the sheath does not. Only a :class:`.effects.ComposedModel`
+    reads the tension (it owns the run); this model's own ``fit(u, y)`` has no tension to read
+    and fits the plain Gamma sum.
+    """
+
+    #: The run channel the widths follow (:class:`.runs.RunData` attribute).
+    widths_follow = "tension_out"
+
+
+LOCAL_BASES: dict[str, type[HysteresisModel]] = {
+    "play_sum": PlaySumModel, "affine": AffineModel, "gamma_tension": TensionWidthGamma}
 
 
 #: Where a record may start in a base's state space: at rest (the family's own start), after

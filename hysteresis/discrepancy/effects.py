@@ -740,6 +740,9 @@ def lowpass(x: FloatArray, tau_s: float, dt: float) -> FloatArray:
 
 #: Base families fitted in closed form (least squares): a backfitting round costs little.
 FAST_FAMILIES = ("gamma", "linear", "play_sum", "affine")
+#: Start positions in the band (as Gamma's ``START_POSITIONS``, finer) a base whose play
+#: widths follow a channel is tried at: one solve each, on the identification run.
+WIDTH_START_POSITIONS = tuple(float(x) for x in np.linspace(0.0, 1.0, 9))
 #: Extra backfitting rounds for a term reading a fast base's prediction (see
 #: :meth:`ComposedModel._rounds`).
 FAST_ROUNDS = 5
@@ -762,6 +765,7 @@ class ComposedModel:
         self.iterations = iterations
         self.tol = tol
         self._gamma: bool | None = None
+        self._widths: str | None = None
 
     def _input(self, run: RunData, friction: FloatArray | None = None) -> FloatArray:
         """The input the base sees: the input-side terms in the order the mechanism applies
@@ -794,6 +798,9 @@ class ComposedModel:
         """
         f = self._friction(run)
         u = self._input(run, f)
+        own = self._width_factor(run)
+        if own is not None:
+            f = own if f is None else f * own
         if f is None:
             f = np.ones(run.n)
         if setup is not None:
@@ -809,6 +816,63 @@ class ComposedModel:
         if getattr(base, "fit_offset", False):
             a = np.column_stack([a, np.ones(run.n)])
         return a
+
+    def _widths_channel(self) -> str:
+        """The run channel the base's play widths follow ('': widths fixed; a
+        :class:`.bases.TensionWidthGamma` base)."""
+        if self._widths is None:
+            self._widths = str(getattr(self.base_factory(), "widths_follow", "") or "")
+        return self._widths
+
+    def _width_factor(self, run: RunData) -> FloatArray | None:
+        """The base's own width factor on ``run``: its channel over the fitted reference
+        (the identification run's median), never below zero (None: widths fixed)."""
+        channel = self._widths_channel()
+        if not channel:
+            return None
+        x = getattr(run, channel, None)
+        if x is None:
+            raise HysteresisError(f"run {run.run_id}: the base's play widths follow "
+                                  f"{channel}, which this run does not carry")
+        return np.asarray(np.maximum(x, 0.0) / self.width_ref_, dtype=np.float64)
+
+    def _width_setup(self, base: HysteresisModel, run: RunData) -> tuple[FloatArray, float]:
+        """(thresholds, start position) of a base whose widths follow a channel: the base's
+        thresholds, and the start position (of :data:`WIDTH_START_POSITIONS`) its plays of
+        those widths fit ``run`` best with, the base alone (the plain plays' choice is not
+        the scaled plays': on a capstan loop started relaxed it took a quarter band for a
+        half, 0.022 mm against 0.014 left). The start the record shows, as every base's."""
+        from hysteresis.gamma import START_GAIN, solve_play_weights
+
+        p, _ = _gamma_setup(base, run)
+        own = self._width_factor(run)
+        assert own is not None
+        u0 = float(run.u[0])
+        offset = [np.ones(run.n)] if getattr(base, "fit_offset", False) else []
+        sse: list[float] = []
+        for pos in WIDTH_START_POSITIONS:
+            start = np.asarray(base.start_outputs(u0, p, pos),  # type: ignore[attr-defined]
+                               dtype=np.float64)
+            a = np.column_stack([scaled_play_bank(run.u, own, p, np.minimum(
+                u0, np.maximum(u0 - p, start))), *offset])
+            x, _ = solve_play_weights(a, run.y, n_weights=p.size,
+                                      constraint=_weight_constraint(base))
+            sse.append(float(np.sum((run.y - a @ x) ** 2)))
+        k = int(np.argmin(sse))
+        if sse[k] > (1.0 - START_GAIN) * sse[0]:
+            k = 0
+        return p, float(WIDTH_START_POSITIONS[k])
+
+    def _set_width_ref(self, run: RunData) -> None:
+        channel = self._widths_channel()
+        if not channel:
+            return
+        x = getattr(run, channel, None)
+        ref = float(np.median(x)) if x is not None else float("nan")
+        if not ref > 0.0:
+            raise HysteresisError(f"run {run.run_id}: the base's play widths follow {channel}, "
+                                  "which this run does not carry or carries at or below zero")
+        self.width_ref_ = ref
 
     def _friction(self, run: RunData) -> FloatArray | None:
         """Product of the operator terms' friction factors (None: no such term)."""
@@ -826,7 +890,8 @@ class ComposedModel:
         base = self.base_factory()
         for stale in ("op_thresholds_", "op_start_position_", "op_weights_"):
             self.__dict__.pop(stale, None)
-        setup = _gamma_setup(base, run)
+        setup = self._width_setup(base, run) if self._widths_channel() \
+            else _gamma_setup(base, run)
         a = self._scaled_design(run, base, setup)
         n_w = int(setup[0].size)
         uses_base = any(t.uses_base for t in self.terms if t.n_linear > 0)
@@ -888,7 +953,8 @@ class ComposedModel:
 
     def fit(self, run: RunData) -> ComposedModel:
         run = self._seen(run)
-        if any(self._on_operators(t) for t in self.terms):
+        self._set_width_ref(run)
+        if self._widths_channel() or any(self._on_operators(t) for t in self.terms):
             return self._fit_operators(run)
         u = self._input(run)
         y = run.y

@@ -21,6 +21,21 @@ log = logging.getLogger(__name__)
 #: A family as the ranking keeps it: (registered or local family name, its parameters).
 Spec = tuple[str, dict[str, Any]]
 
+#: A base that reads a channel beyond the input (plays whose widths follow the output tension,
+#: :class:`.bases.TensionWidthGamma`) ranks only where it predicts the held-out runs this
+#: fraction better than every base of fixed shape: under a follower of constant load its
+#: widths hardly change, it is the free Gamma sum again, and as the second base tried it would
+#: repeat the first instead of giving another family's answer. (On a clean-room capstan loop
+#: under a return spring it left 0.010-0.024 mm where the best fixed base left 0.094.)
+CHANNEL_BASE_GAIN = 0.2
+
+
+def reads_channel(name: str) -> str:
+    """The run channel a local base family reads beyond the input ('' for none)."""
+    from hysteresis.discrepancy.bases import LOCAL_BASES
+
+    return str(getattr(LOCAL_BASES.get(name), "widths_follow", "") or "")
+
 
 def rank_bases(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
                ) -> tuple[str, dict[str, Any], dict[str, float], dict[str, Spec]]:
@@ -29,9 +44,17 @@ def rank_bases(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
     groups = group_runs(runs)
     scores: dict[str, float] = {}
     specs: dict[str, Spec] = {}
+    reading: list[str] = []
     for label, spec in families.items():
         params = dict(spec or {})
         name = str(params.pop("family", label))
+        channel = reads_channel(name)
+        if channel:
+            if any(getattr(r, channel) is None for r in runs):
+                log.info("base family %s not ranked: the runs do not all carry %s", label,
+                         channel)
+                continue
+            reading.append(label)
         try:
             factory = base_factory_for(name, **params)
             models = {g.key: ComposedModel(factory).fit(g.ident) for g in groups}
@@ -43,6 +66,13 @@ def rank_bases(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
         if math.isfinite(score):
             scores[label] = score
             specs[label] = (name, params)
+    fixed = [v for k, v in scores.items() if k not in reading]
+    for label in [k for k in reading if k in scores]:
+        if fixed and scores[label] > (1.0 - CHANNEL_BASE_GAIN) * min(fixed):
+            log.info("base family %s not ranked: %.4g held out, not %g better than the best "
+                     "base of fixed shape (%.4g)", label, scores[label], CHANNEL_BASE_GAIN,
+                     min(fixed))
+            del scores[label], specs[label]
     if not scores:
         raise DiscrepancyError("no base family could be fitted to this source")
     best = min(scores, key=scores.__getitem__)

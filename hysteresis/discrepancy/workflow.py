@@ -949,6 +949,10 @@ def strip_private(report: dict[str, Any]) -> dict[str, Any]:
 BASE_DEFAULTS: dict[str, dict[str, Any]] = {
     "gamma": {"constraint": "sum_to_one", "fit_offset": False, "start_state": "fit",
               "threshold_fraction": 1.0 / 6.0},
+    # plays whose widths follow the output tension (.bases.TensionWidthGamma): the loop's
+    # shape free as gamma_free's, its widths the capstan law's
+    "gamma_tension": {"constraint": "free", "fit_offset": True, "start_state": "fit",
+                      "threshold_fraction": 1.0 / 6.0},
     "linear": {"delay": 0},  # a searched delay would take up the latency looked for
     # the base keeps its physical loop form: the workflow's effects are what bend it, and a
     # form chosen per source would change with the effect hidden in it
