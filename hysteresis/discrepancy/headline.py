@@ -84,7 +84,38 @@ def _nothing_added(report: Mapping[str, Any], also: str) -> str:
     if report["verdict"] == "unexplained":
         tried_terms = ", ".join(s["name"] for s in (report.get("rankings") or [[]])[0])
         return (f"unexplained: the base {report['base_family']} leaves a residual no "
-                f"candidate term reduces ({rmse}; tried: {tried_terms or 'none'}); see the "
-                f"located segments{absorbed}{also}")
+                f"candidate term explains ({rmse}; tried: {tried_terms or 'none'})"
+                f"{_refused(report)}; see the located segments{absorbed}{also}")
     return (f"no missing effect: no candidate term beats the noise on the held-out runs "
             f"(base {report['base_family']}, {rmse}){absorbed}{also}")
+
+
+#: A candidate the load cells refused is told in the headline when it cut the held-out error by
+#: at least this fraction (the stage's default bar for naming an effect): the reader should know
+#: the output alone would have named it.
+REFUSED_SHOWN_GAIN = 0.2
+
+#: What each load-cell reading measures (the readings of :mod:`.friction`).
+_READING = {"speed_ratio": "friction at speed over friction at low speed",
+            "direction_ratio": "friction pulling over friction releasing",
+            "dead_travel": "dead travel after a reversal, as a fraction of the span"}
+
+
+def _refused(report: Mapping[str, Any]) -> str:
+    """The first round's candidates that cut the held-out error as much as a named effect
+    must, refused because the load cells do not show what they claim."""
+    out = []
+    for s in (report.get("rankings") or [[]])[0]:
+        ev = s.get("load_cell_evidence") or {}
+        gain = float(s.get("relative_gain", 0.0))
+        if ev.get("corroborated") is not False or gain < REFUSED_SHOWN_GAIN:
+            continue
+        forms = sorted({str(p["form"]) for p in (s.get("parameters") or {}).values()
+                        if isinstance(p, Mapping) and p.get("form")})
+        reads = ", ".join(f"{float(v):.2f}" for v in (ev.get("per_configuration") or {}).values()
+                          if v is not None)
+        claim = str(ev.get("claim", ""))
+        out.append(f"{s['name']}{' (' + ', '.join(forms) + ')' if forms else ''} would cut "
+                   f"it {100 * gain:.0f} % but the load cells do not show it "
+                   f"({_READING.get(claim, claim)}: {reads or 'not read'})")
+    return "; " + "; ".join(out) if out else ""
