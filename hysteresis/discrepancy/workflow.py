@@ -21,7 +21,7 @@ take are scored once more and reported as ``measured_within_reach``: named, not 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
 
@@ -334,8 +334,10 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
     ``strength`` x the output's standard deviation); the plain base is refitted to the distorted
     signal. Returns the remaining fraction of the distortion (near 0: within the base's reach).
     """
-    base = base_factory().fit(ident.u, ident.y)
-    y0 = base.predict(ident.u)
+    # through the composed model, so a base that reads a channel (play widths following the
+    # output tension) is the same model here as in the search
+    base = ComposedModel(base_factory).fit(ident)
+    y0 = base.predict(ident)
     out: dict[str, float] = {}
     for name in names:
         eff = CANDIDATES[name]
@@ -347,7 +349,7 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
         seen = eff.delayed(ident, theta)  # the same path as the composed model's input
         u = (eff.transform_input(seen, seen.u, theta, ctx) if eff.side_of(theta) == "input"
              else ident.u)
-        y_syn = base.predict(u)
+        y_syn = base.predict(replace(ident, u=u))
         if eff.n_linear_of(theta):
             phi = eff.features(ident, theta, y_syn, ctx)
             contrib = phi @ np.ones(phi.shape[1])
@@ -357,8 +359,9 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
         dist = _rmse(y_syn - y0)
         if dist == 0:
             continue
-        refit = base_factory().fit(ident.u, y_syn)
-        out[name] = _rmse(y_syn - refit.predict(ident.u)) / dist
+        distorted = replace(ident, y=y_syn)
+        refit = ComposedModel(base_factory).fit(distorted)
+        out[name] = _rmse(y_syn - refit.predict(distorted)) / dist
     return out
 
 
