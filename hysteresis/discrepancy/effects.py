@@ -809,10 +809,7 @@ class ComposedModel:
             p, pos = self.op_thresholds_, self.op_start_position_
         else:
             p, pos = _gamma_setup(base, run)
-        u0 = float(u[0])
-        start = np.asarray(base.start_outputs(u0, p, pos),  # type: ignore[attr-defined]
-                           dtype=np.float64)
-        a = scaled_play_bank(u, f, p, np.minimum(u0, np.maximum(u0 - p, start)))
+        a = scaled_play_bank(u, f, p, _play_starts(base, float(u[0]), p, pos))
         if getattr(base, "fit_offset", False):
             a = np.column_stack([a, np.ones(run.n)])
         return a
@@ -847,14 +844,11 @@ class ComposedModel:
         p, _ = _gamma_setup(base, run)
         own = self._width_factor(run)
         assert own is not None
-        u0 = float(run.u[0])
         offset = [np.ones(run.n)] if getattr(base, "fit_offset", False) else []
         sse: list[float] = []
         for pos in WIDTH_START_POSITIONS:
-            start = np.asarray(base.start_outputs(u0, p, pos),  # type: ignore[attr-defined]
-                               dtype=np.float64)
-            a = np.column_stack([scaled_play_bank(run.u, own, p, np.minimum(
-                u0, np.maximum(u0 - p, start))), *offset])
+            start = _play_starts(base, float(run.u[0]), p, pos)
+            a = np.column_stack([scaled_play_bank(run.u, own, p, start), *offset])
             x, _ = solve_play_weights(a, run.y, n_weights=p.size,
                                       constraint=_weight_constraint(base))
             sse.append(float(np.sum((run.y - a @ x) ** 2)))
@@ -1120,6 +1114,14 @@ def _gamma_setup(base: HysteresisModel, run: RunData) -> tuple[FloatArray, float
         raise HysteresisError(f"{type(base).__name__} has no play-operator thresholds")
     p, pos = setup(run.u, run.y)
     return np.asarray(p, dtype=np.float64), float(pos)
+
+
+def _play_starts(base: HysteresisModel, u0: float, p: FloatArray, pos: float) -> FloatArray:
+    """Every play's output before the first input ``u0``: the Gamma base's start at band
+    position ``pos``, within each play's band ``[u0 - p_i, u0]``."""
+    start = np.asarray(base.start_outputs(u0, p, pos),  # type: ignore[attr-defined]
+                       dtype=np.float64)
+    return np.asarray(np.minimum(u0, np.maximum(u0 - p, start)), dtype=np.float64)
 
 
 def is_gamma(base: HysteresisModel) -> bool:
