@@ -14,7 +14,7 @@ from hysteresis.base import HysteresisError
 from hysteresis.discrepancy.base_check import Workflow, base_misfit, second_opinion
 from hysteresis.discrepancy.errors import DiscrepancyError
 from hysteresis.discrepancy.headline import headline
-from hysteresis.discrepancy.ranking import pick_base, rank_bases
+from hysteresis.discrepancy.ranking import pick_base, rank_bases, reads_channel
 from hysteresis.discrepancy.runs import RunData, chain_records, check_one_rig
 from hysteresis.discrepancy.workflow import (
     SESSION_GAIN,
@@ -64,6 +64,7 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
         check_one_rig(runs)
     except HysteresisError as err:
         raise DiscrepancyError(str(err)) from None
+    _check_channel(runs, base_family)
     runs, session, history_report = run_history(runs, history)
     workflow = _workflow_on(runs, st, _model_error(runs) if ukf_evidence else None, session)
     auto_scores: dict[str, float] = {}
@@ -88,6 +89,18 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
                                             factor=base_misfit_factor)
     report["headline"] = headline(report)
     return report, full
+
+
+def _check_channel(runs: list[RunData], base_family: str) -> None:
+    """A given base that reads a channel (``gamma_tension``: the output load cell) fails at
+    once, in one line naming the runs, where a run does not carry it."""
+    channel = reads_channel(base_family)
+    missing = [r.run_id for r in runs if channel and getattr(r, channel) is None]
+    if missing:
+        raise DiscrepancyError(
+            f"base_family={base_family}: its play widths follow the output tension "
+            f"(tension_out_n), which {len(missing)} run(s) do not carry ({', '.join(missing[:3])}"
+            f"{', ...' if len(missing) > 3 else ''}); base_family=auto leaves it out on such runs")
 
 
 #: Two bases whose models with their terms predict the held-out runs within this factor of

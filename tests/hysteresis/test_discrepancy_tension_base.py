@@ -19,6 +19,7 @@ from hysteresis.base import HysteresisError
 from hysteresis.discrepancy._ops import scaled_play_bank
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.effects import ComposedModel
+from hysteresis.discrepancy.errors import DiscrepancyError
 from hysteresis.discrepancy.ranking import rank_bases
 from hysteresis.discrepancy.runs import RunData
 from hysteresis.discrepancy.workflow import base_factory_for, evaluate, group_runs
@@ -87,6 +88,10 @@ def test_runs_without_an_output_tension_skip_it_and_a_fit_names_the_channel() ->
     assert set(scores) == set(FIXED)
     with pytest.raises(HysteresisError, match="tension_out"):
         ComposedModel(base_factory_for("gamma_tension")).fit(runs[0])
+    # given as the base: one line before any work, naming the runs and the way out
+    with pytest.raises(DiscrepancyError, match=r"2 run\(s\) do not carry \(sine_1, triangle_2\)"
+                       r".*base_family=auto"):
+        analyse(runs, base_family="gamma_tension", auto_families={})
 
 
 @pytest.mark.slow
