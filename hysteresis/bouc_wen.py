@@ -52,6 +52,7 @@ from hysteresis._numerics import decimation_indices
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
+    Records,
     StatefulModel,
     as_1d,
     check_records,
@@ -140,11 +141,25 @@ class BoucWenModel(StatefulModel):
             raise HysteresisError(
                 f"unknown Bouc-Wen method {self.method!r}; use 'varpro' or one of {_RAW_METHODS}"
             )
+        return self._fit(recs, x0=fit_params.get("x0"))
+
+    def refit_warm(self, u: Any, y: Any) -> BoucWenModel:
+        """Fit again on a new output ``y`` from the current loop shape: one local search, no
+        grid of starts (varpro only). A backfitting loop refits one input many times against
+        outputs that differ by a small term, and the shape moves little between its rounds."""
+        self.check_fitted()
+        if self.method != "varpro":
+            return self.fit(u, y)
+        return self._fit(check_records(u, y, min_samples=10),
+                         warm=(float(self.A_), float(self.B_), float(self.n_)))
+
+    def _fit(self, recs: Records, *, x0: Any = None,
+             warm: tuple[float, float, float] | None = None) -> BoucWenModel:
         thin = recs.thin(decimation_indices(recs, int(self.fit_max_samples)))
         ud, yd = thin.u, thin.y
         if self.method == "varpro":
             with single_thread_blas():
-                params, offset = self._fit_varpro(ud, yd, thin.slices())
+                params, offset = self._fit_varpro(ud, yd, thin.slices(), warm=warm)
         else:
             from hysteresis._bw_raw import fit_raw
 
@@ -155,7 +170,7 @@ class BoucWenModel(StatefulModel):
                 raise HysteresisError(
                     f"method {self.method!r} fits the paper's exact form; set fit_offset=False"
                 )
-            res = fit_raw(ud, yd, method=self.method, x0=fit_params.get("x0"),
+            res = fit_raw(ud, yd, method=self.method, x0=x0,
                           seed=self.seed, max_substeps=self.max_substeps)
             params, offset = res.x, 0.0
         a_, b_, c_, n, alpha, beta = (float(v) for v in params)
@@ -166,10 +181,12 @@ class BoucWenModel(StatefulModel):
         self.n_samples_ = int(recs.u.size)
         return self
 
-    def _fit_varpro(self, u: FloatArray, y: FloatArray,
-                    pieces: list[slice]) -> tuple[FloatArray, float]:
+    def _fit_varpro(self, u: FloatArray, y: FloatArray, pieces: list[slice], *,
+                    warm: tuple[float, float, float] | None = None
+                    ) -> tuple[FloatArray, float]:
         """Canonical shape search with the linear stage projected out; ``pieces`` are the
-        records (each simulated from h = 0 at its own first input)."""
+        records (each simulated from h = 0 at its own first input). ``warm``: (A, B, n) of a
+        previous fit on the same input, the one start of the local search."""
         uc, us = _normaliser(u, "u")
         yc, ys = _normaliser(y, "y")
         if not self.fit_offset:
@@ -206,7 +223,13 @@ class BoucWenModel(StatefulModel):
             for r in (0.0, 4.0)
             for n in (1.5, 4.0)
         ]
-        scored = sorted(grid, key=lambda z: objective(z)[0])
+        if warm is None:
+            scored = sorted(grid, key=lambda z: objective(z)[0])
+        else:
+            a_w, b_w, n_w = warm
+            z_w = np.array([math.log(1.0 / (a_w * us)), 2.0 * b_w / a_w - 1.0, n_w])
+            lo, hi = np.array(bounds).T
+            scored = [np.clip(z_w, lo, hi)]
         best_z, best_f = scored[0], objective(scored[0])[0]
         for z0 in scored[: max(1, int(self.n_starts))]:
             res = minimize(objective, z0, jac=True, method="L-BFGS-B", bounds=bounds,

@@ -43,6 +43,7 @@ from hysteresis._numerics import decimation_indices
 from hysteresis.base import (
     FloatArray,
     HysteresisError,
+    Records,
     StatefulModel,
     as_1d,
     check_records,
@@ -275,6 +276,22 @@ class ColemanHodgdonModel(StatefulModel):
             b_sign, _ = choose_form(lambda form: type(self)(**{**params, "b_sign": form}),
                                     ("negative", "free"), recs)
         self.b_sign_ = b_sign
+        return self._fit(recs)
+
+    def refit_warm(self, u: Any, y: Any) -> ColemanHodgdonModel:
+        """Fit again on a new output ``y`` from the current loop, the sign form kept: with
+        ``varpro`` ``A`` is searched on a short grid about its value, with ``ga`` the local
+        polish starts from the current parameters (no evolution). A backfitting loop refits
+        one input many times against outputs that differ by a small term, and the loop moves
+        little between its rounds."""
+        self.check_fitted()
+        recs = check_records(u, y, min_samples=10)
+        return self._fit(recs, warm=(float(self.A_), float(self.B_), float(self.C_),
+                                     float(self.origin_y_)))
+
+    def _fit(self, recs: Records, *, warm: tuple[float, float, float, float] | None = None
+             ) -> ColemanHodgdonModel:
+        b_sign = str(self.b_sign_)
         euler = _is_euler(self.scheme)
         thin = recs.thin(decimation_indices(recs, int(self.fit_max_samples)))
         ud, yd = thin.u, thin.y
@@ -284,12 +301,18 @@ class ColemanHodgdonModel(StatefulModel):
         un = (ud - uc) / us
         yn = (yd - yc) / ys
         b_hi = -1e-9 if b_sign == "negative" else 20.0
+        z_warm = None
+        if warm is not None:  # the current parameters in the normalised units
+            a_w, b_w, c_w, oy_w = warm
+            z_warm = np.array([math.log10(max(a_w * us, 1e-12)), b_w * us / ys, c_w * us / ys,
+                               (oy_w - yc) / ys])
         if self.method == "ga":
             with single_thread_blas():
-                z = self._fit_ga(un, yn, euler, b_hi, pieces)
+                z = self._fit_ga(un, yn, euler, b_hi, pieces, warm=z_warm)
         elif self.method == "varpro":
+            warm_la = None if z_warm is None else float(z_warm[0])
             with single_thread_blas():
-                z = self._fit_varpro(un, yn, euler, b_hi, pieces)
+                z = self._fit_varpro(un, yn, euler, b_hi, pieces, warm_la=warm_la)
         else:
             raise HysteresisError(
                 f"unknown Coleman-Hodgdon method {self.method!r}; use 'ga' or 'varpro'"
@@ -307,7 +330,7 @@ class ColemanHodgdonModel(StatefulModel):
         return self
 
     def _fit_ga(self, un: FloatArray, yn: FloatArray, euler: bool, b_hi: float,
-                pieces: list[slice]) -> FloatArray:
+                pieces: list[slice], *, warm: FloatArray | None = None) -> FloatArray:
         def batch(pop: FloatArray) -> FloatArray:
             pop2 = np.ascontiguousarray(pop.reshape(4, -1), dtype=np.float64)
             out = np.zeros(pop2.shape[1])
@@ -320,24 +343,29 @@ class ColemanHodgdonModel(StatefulModel):
         # Normalised units: slopes are O(1); log10 A in [-1.5, 2.5] spans loops that close
         # over 30 to 0.003 half-ranges of input.
         bounds = [(-1.5, 2.5), (-20.0, b_hi), (1e-6, 20.0), (-5.0, 5.0)]
-        res = differential_evolution(
-            batch, bounds, seed=int(self.seed), popsize=int(self.popsize),
-            maxiter=int(self.maxiter), tol=1e-10, atol=0.0, polish=False,
-            vectorized=True, updating="deferred", init="sobol",
-        )
-        x = np.asarray(res.x, dtype=np.float64)
-        if self.polish:
+        if warm is not None:  # the polish alone, from there
+            lo, hi = np.array(bounds).T
+            x = np.clip(warm, lo, hi)
+            res_fun = float(batch(x.reshape(4, 1))[0])
+        else:
+            res = differential_evolution(
+                batch, bounds, seed=int(self.seed), popsize=int(self.popsize),
+                maxiter=int(self.maxiter), tol=1e-10, atol=0.0, polish=False,
+                vectorized=True, updating="deferred", init="sobol",
+            )
+            x, res_fun = np.asarray(res.x, dtype=np.float64), float(res.fun)
+        if self.polish or warm is not None:
             # scipy's own polish stops at its default relative ftol, which on an MSE near
             # zero leaves the 4th digit wrong; polish with tight tolerances instead.
             pol = minimize(lambda z: float(batch(z.reshape(4, 1))[0]), x, method="L-BFGS-B",
                            bounds=bounds, options={"ftol": 1e-15, "gtol": 1e-12,
                                                    "maxiter": 500})
-            if float(pol.fun) <= float(res.fun):
+            if float(pol.fun) <= res_fun:
                 x = np.asarray(pol.x, dtype=np.float64)
         return x
 
     def _fit_varpro(self, un: FloatArray, yn: FloatArray, euler: bool, b_hi: float,
-                    pieces: list[slice]) -> FloatArray:
+                    pieces: list[slice], *, warm_la: float | None = None) -> FloatArray:
         basis = np.empty((un.size, 3))
         lb = np.array([-20.0, 1e-6, -np.inf])
         ub = np.array([b_hi, np.inf, np.inf])
@@ -354,6 +382,8 @@ class ColemanHodgdonModel(StatefulModel):
             return float(r @ r) / un.size, x
 
         grid = np.linspace(-1.5, 2.5, 33)
+        if warm_la is not None:  # the full grid's spacing, about the last value
+            grid = np.unique(np.clip(warm_la + 0.125 * np.arange(-2, 3), -1.5, 2.5))
         vals = [solve(float(g))[0] for g in grid]
         i = int(np.argmin(vals))
         lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]

@@ -237,8 +237,20 @@ class PreisachModel(StatefulModel):
         self._fit_signed(recs, str(sign))
         return self
 
-    def _fit_signed(self, recs: Records, sign: str) -> None:
-        """Identify the plane on ``recs`` with the density's sign fixed."""
+    def refit_warm(self, u: Any, y: Any) -> PreisachModel:
+        """Fit again on a new output ``y`` from the current density's shape (its sign kept):
+        one local search, no grid of starts. A backfitting loop refits one input many times
+        against outputs that differ by a small term, and the shape moves little between its
+        rounds. A free (nonparametric) density has no shape to start from: fitted in full."""
+        self.check_fitted()
+        recs = check_records(u, y)
+        warm = None if self.density == "nonparametric" else np.array(self.density_params_)
+        self._fit_signed(recs, str(self.density_sign_), warm=warm)
+        return self
+
+    def _fit_signed(self, recs: Records, sign: str, *, warm: FloatArray | None = None) -> None:
+        """Identify the plane on ``recs`` with the density's sign fixed (``warm``: the local
+        search's start, else the best of a grid)."""
         self._set_plane(recs.u)
         every = int(self.fit_every)
         blocks = []
@@ -256,7 +268,7 @@ class PreisachModel(StatefulModel):
             if self.density == "nonparametric":
                 self._fit_nonparametric(rows, target, u_rows, sgn)
             else:
-                self._fit_parametric(rows, target, recs.u, u_rows, sgn)
+                self._fit_parametric(rows, target, recs.u, u_rows, sgn, warm=warm)
         self.density_sign_ = sign
         if sgn < 0 and not self._rises(recs):
             # a negative plane below a small reversible gain fits an output that falls with
@@ -283,7 +295,8 @@ class PreisachModel(StatefulModel):
         self.density_params_ = np.zeros(0)
 
     def _fit_parametric(self, rows: FloatArray, target: FloatArray, u: FloatArray,
-                        u_rows: FloatArray, sgn: float) -> None:
+                        u_rows: FloatArray, sgn: float, *,
+                        warm: FloatArray | None = None) -> None:
         # x = (N, H0, sigma, centre, kappa, offset, gain); N, offset, gain enter linearly.
         half = 0.5 * float(u.max() - u.min())
         centre0 = 0.5 * float(u.max() + u.min())
@@ -310,7 +323,8 @@ class PreisachModel(StatefulModel):
             res_: FloatArray = a @ c - qt
             return coef, res_
 
-        best = _grid_start(linear_part, half, centre0, spread_free)
+        best = (_grid_start(linear_part, half, centre0, spread_free) if warm is None
+                else (0.0, np.array(warm, dtype=np.float64)))
         # Nonlinear least squares over the shape only (H0, sigma, centre[, kappa]); the
         # linear part is projected out at every evaluation (far fewer iterations than
         # optimising N and the offset jointly with the shape).
