@@ -8,6 +8,7 @@ family: they exist so the discrepancy analysis can run (and be tested) on its ow
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -200,15 +201,34 @@ class FromRecordStart(HysteresisModel):
         return np.asarray(out[pre.size:], dtype=np.float64)
 
     def fit(self, u: Any, y: Any, **fit_params: Any) -> FromRecordStart:
-        from hysteresis.gamma import START_GAIN
-
         uu, yy = check_pair(u, y)
         self.base_ = self.factory().fit(uu, yy, **fit_params)
         self.span_ = float(np.ptp(uu))
+        self._choose_start(uu, yy)
+        return self
+
+    def _choose_start(self, uu: FloatArray, yy: FloatArray) -> None:
+        from hysteresis.gamma import START_GAIN
+
         sse = {s: float(np.sum((yy - self._run(uu, s)) ** 2)) for s in STARTS}
         best = min(sse, key=sse.__getitem__)
         self.start_ = best if sse[best] < (1.0 - START_GAIN) * sse["rest"] else "rest"
-        return self
+
+    @property
+    def refit_warm(self) -> Callable[[Any, Any], FromRecordStart]:
+        """The base's fit from its current shape (where it has one: a backfitting loop asks
+        for it), the start chosen again."""
+        warm = getattr(self.__dict__.get("base_"), "refit_warm", None)
+        if warm is None:
+            raise AttributeError("refit_warm")
+
+        def refit(u: Any, y: Any) -> FromRecordStart:
+            uu, yy = check_pair(u, y)
+            warm(uu, yy)
+            self._choose_start(uu, yy)
+            return self
+
+        return refit
 
     def predict(self, u: Any, *, state: Any = None) -> FloatArray:
         self.check_fitted()

@@ -746,6 +746,9 @@ WIDTH_START_POSITIONS = tuple(float(x) for x in np.linspace(0.0, 1.0, 9))
 #: Extra backfitting rounds for a term reading a fast base's prediction (see
 #: :meth:`ComposedModel._rounds`).
 FAST_ROUNDS = 5
+#: An iterative base that can fit again from its current shape (``refit_warm``: Bouc-Wen)
+#: does so in the backfitting rounds after the first, instead of a search from its grid.
+WARM_BACKFIT = True
 
 
 class ComposedModel:
@@ -979,6 +982,7 @@ class ComposedModel:
         once at its end; should that full fit choose another structure, the alternation runs
         once more from it."""
         refit = hasattr(base, "refit_weights")
+        warm_fits = WARM_BACKFIT and hasattr(base, "refit_warm")
         st = _BackfitState(base, np.zeros_like(y))
 
         def step(yb: FloatArray) -> tuple[FloatArray, float]:
@@ -987,6 +991,10 @@ class ComposedModel:
             st.g = phi @ coef
             if refit:
                 st.base.refit_weights(u, y - st.g)  # type: ignore[attr-defined]
+            elif warm_fits:
+                # from the last round's shape: the shape moves little between rounds, and a
+                # search from the grid each round was most of an iterative base's time
+                st.base.refit_warm(u, y - st.g)  # type: ignore[attr-defined]
             else:
                 st.base = self.base_factory()
                 st.base.fit(u, y - st.g)

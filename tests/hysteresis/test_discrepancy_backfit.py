@@ -10,7 +10,7 @@ import pytest
 
 from hysteresis.discrepancy.bases import PlaySumModel
 from hysteresis.discrepancy.effects import CANDIDATES, ComposedModel, Term, _Anderson
-from hysteresis.discrepancy.inject import injected_runs
+from hysteresis.discrepancy.inject import NOISE_MM, injected_runs
 from hysteresis.discrepancy.workflow import base_factory_for
 from hysteresis.gamma import GammaModel, solve_play_weights
 
@@ -104,3 +104,64 @@ def test_a_known_tanh_stop_is_fitted_exactly_by_the_accelerated_backfitting() ->
     m.fit(obs)
     assert np.allclose(m.coef_, -1.0, atol=0.01)  # the shortfall x - Y tanh(x / Y), taken off
     assert np.sqrt(np.mean((m.predict(obs) - y) ** 2)) < 1e-3 * ctx["half"]
+
+
+def _smooth_record(start: str = "rest", plant: str = "bouc_wen_loop"
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    run = injected_runs(plant, start=start, kinds=("sine_decay",))[0]
+    return run.u[:900], run.y[:900]
+
+
+@pytest.mark.parametrize(("family", "plant"), [
+    ("bouc_wen", "bouc_wen_loop"), ("coleman_hodgdon", "bouc_wen_loop"), ("preisach", "preisach")])
+def test_a_warm_refit_lands_where_a_fresh_fit_does(family, plant) -> None:
+    # a backfitting round refits the base on an output that differs by a small term: from
+    # the last round's shape (one local search) it must find the fresh fit's loop
+    u, y = _smooth_record(plant=plant)
+    factory = base_factory_for(family, screen=False)
+    m = factory().fit(u, y)
+    y2 = y + 0.04 * np.sin(np.linspace(0.0, 7.0, y.size)) + 0.01 * u
+    m.refit_warm(u, y2)
+    fresh = factory().fit(u, y2)
+    warm_rmse = np.sqrt(np.mean((m.predict(u) - y2) ** 2))
+    fresh_rmse = np.sqrt(np.mean((fresh.predict(u) - y2) ** 2))
+    assert warm_rmse <= 1.02 * fresh_rmse, (warm_rmse, fresh_rmse)
+
+
+def test_a_warm_refit_keeps_a_loaded_start_chosen_on_the_record() -> None:
+    u, y = _smooth_record("loaded")
+    m = base_factory_for("bouc_wen", screen=False)().fit(u, y)
+    assert m.start_ == "loaded"
+    m.refit_warm(u, y + 0.02)
+    assert m.start_ == "loaded"
+    assert np.sqrt(np.mean((m.predict(u) - y - 0.02) ** 2)) < 2.0 * NOISE_MM
+
+
+def test_backfitting_from_the_last_shape_matches_the_fits_from_the_grid(monkeypatch) -> None:
+    # the rounds after the first start from the last round's shape: the model found (a
+    # Bouc-Wen base and a linear creep) is the one that searching the grid every round finds,
+    # with one grid search instead of one a round
+    from hysteresis import bouc_wen
+    from hysteresis.discrepancy import effects
+
+    run = injected_runs("bouc_wen_loop", {"drift:linear": 2.0}, kinds=("sine_decay",))[0]
+    factory = base_factory_for("bouc_wen", screen=False)
+    drift = CANDIDATES["drift"]
+    theta = ("linear", 0.0)
+    term = Term(drift, theta, tuple(sorted(drift.context(run).items())))
+    grids = []
+    real = bouc_wen.BoucWenModel._fit_varpro
+
+    def counted(self, *args, **kwargs):
+        grids.append(kwargs.get("warm") is None)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(bouc_wen.BoucWenModel, "_fit_varpro", counted)
+    warm = ComposedModel(factory, [term]).fit(run)
+    warm_grids = sum(grids)
+    grids.clear()
+    monkeypatch.setattr(effects, "WARM_BACKFIT", False)
+    cold = ComposedModel(factory, [term]).fit(run)
+    assert warm_grids == 1 < sum(grids)
+    rmse = [np.sqrt(np.mean((m.predict(run) - run.y) ** 2)) for m in (warm, cold)]
+    assert rmse[0] <= 1.02 * rmse[1] and rmse[0] < 2.0 * NOISE_MM, rmse
