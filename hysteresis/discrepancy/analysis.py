@@ -14,7 +14,7 @@ from hysteresis.base import HysteresisError
 from hysteresis.discrepancy.base_check import Workflow, base_misfit, second_opinion
 from hysteresis.discrepancy.errors import DiscrepancyError
 from hysteresis.discrepancy.headline import headline
-from hysteresis.discrepancy.ranking import pick_base, rank_bases, reads_channel
+from hysteresis.discrepancy.ranking import pick_base, rank_bases, runs_lacking
 from hysteresis.discrepancy.runs import RunData, chain_records, check_one_rig
 from hysteresis.discrepancy.workflow import (
     SESSION_GAIN,
@@ -94,8 +94,7 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
 def _check_channel(runs: list[RunData], base_family: str) -> None:
     """A given base that reads a channel (``gamma_tension``: the output load cell) fails at
     once, in one line naming the runs, where a run does not carry it."""
-    channel = reads_channel(base_family)
-    missing = [r.run_id for r in runs if channel and getattr(r, channel) is None]
+    _, missing = runs_lacking(runs, base_family)
     if missing:
         raise DiscrepancyError(
             f"base_family={base_family}: its play widths follow the output tension "

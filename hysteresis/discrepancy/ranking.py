@@ -37,6 +37,13 @@ def reads_channel(name: str) -> str:
     return str(getattr(LOCAL_BASES.get(name), "widths_follow", "") or "")
 
 
+def runs_lacking(runs: list[RunData], name: str) -> tuple[str, list[str]]:
+    """The channel base family ``name`` reads beyond the input, and the ids of the runs that
+    do not carry it (``("", [])`` for a family that reads none)."""
+    channel = reads_channel(name)
+    return channel, [r.run_id for r in runs if channel and getattr(r, channel) is None]
+
+
 def rank_bases(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
                ) -> tuple[str, dict[str, Any], dict[str, float], dict[str, Spec]]:
     """Every family of ``families`` scored by its plain held-out RMSE: (best family, its
@@ -48,9 +55,9 @@ def rank_bases(runs: list[RunData], families: Mapping[str, Mapping[str, Any]]
     for label, spec in families.items():
         params = dict(spec or {})
         name = str(params.pop("family", label))
-        channel = reads_channel(name)
+        channel, lacking = runs_lacking(runs, name)
         if channel:
-            if any(getattr(r, channel) is None for r in runs):
+            if lacking:
                 log.info("base family %s not ranked: the runs do not all carry %s", label,
                          channel)
                 continue
