@@ -746,8 +746,9 @@ WIDTH_START_POSITIONS = tuple(float(x) for x in np.linspace(0.0, 1.0, 9))
 #: Extra backfitting rounds for a term reading a fast base's prediction (see
 #: :meth:`ComposedModel._rounds`).
 FAST_ROUNDS = 5
-#: An iterative base that can fit again from its current shape (``refit_warm``: Bouc-Wen)
-#: does so in the backfitting rounds after the first, instead of a search from its grid.
+#: An iterative base that can fit again from its current shape (``refit_warm``: Bouc-Wen,
+#: Preisach, Coleman-Hodgdon) does so in the backfitting rounds after the first, instead of a
+#: search from its grid or its evolution.
 WARM_BACKFIT = True
 
 
