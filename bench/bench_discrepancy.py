@@ -69,6 +69,7 @@ def run() -> dict[str, Any]:
     return {
         "injector": injector,
         "blas_limit": blas_limit(),
+        "warm_backfit": warm_backfit(),
         "samples_analysed": n_samples,
         "effects_found": [e["name"] for e in rep["effects"]],
         "heldout_rmse_before": rep["summary"]["heldout_rmse_before"],
@@ -488,6 +489,48 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
     return out
 
 
+#: (base, plant, injected effect, strength, start, candidate) of :func:`warm_backfit`: a soft
+#: stop under a Bouc-Wen base (a term that reads the base's prediction: many rounds) and a
+#: creep under a Preisach base.
+WARM_CASES = (("bouc_wen", "gamma", "saturation", 2.0, "loaded", "saturation"),
+              ("preisach", "preisach", "drift", 1.0, "rest", "drift"))
+
+
+def warm_backfit() -> dict[str, dict[str, float]]:
+    """An iterative base and one term fitted jointly on an injector source's identification
+    run (:func:`hysteresis.discrepancy.effects.fit_with_effect`, the term's parameter on its
+    grid), the rounds after the first refitting the base from its last shape against the
+    reference, a search from the base's grid every round (``effects.WARM_BACKFIT`` off): the
+    seconds of each, their ratio and each model's held-out RMSE."""
+    return {f"{case[0]}+{case[5]}": _warm_case(*case) for case in WARM_CASES}
+
+
+def _warm_case(base: str, plant: str, effect: str, strength: float, start: str,
+               name: str) -> dict[str, float]:
+    from functools import partial
+
+    import numpy as np
+
+    from hysteresis.discrepancy import effects
+    from hysteresis.discrepancy.inject import injected_runs
+    from hysteresis.discrepancy.workflow import base_factory_for
+
+    ident, *held = injected_runs(plant, {effect: strength}, start=start)
+    fit = partial(effects.fit_with_effect, base_factory_for(base), [],
+                  effects.candidate(name), ident)
+
+    def heldout(model: Any) -> float:
+        e = np.concatenate([r.y - model.predict(r) for r in held])
+        return float(np.sqrt(np.mean(e**2)))
+
+    fit()  # warm numba caches
+    t_warm, warm = _time(fit)
+    with mock.patch.object(effects, "WARM_BACKFIT", False):
+        t_ref, ref = _time(fit)
+    return {"s_warm": t_warm, "s_grid_every_round": t_ref, "speedup": t_ref / t_warm,
+            "heldout_rmse_warm": heldout(warm), "heldout_rmse_grid_every_round": heldout(ref)}
+
+
 def blas_limit(calls: int = 300) -> dict[str, float]:
     """The one-BLAS-thread limit as identification enters it (thousands of times a
     workflow): the cached controller against ``threadpool_limits``, which rescans the loaded
@@ -525,6 +568,9 @@ if __name__ == "__main__":
                            "strengths (176 sources: about 40 min of one core)")
     part.add_argument("--bases", action="store_true",
                       help="only the base-independence table (about 25 min on 2 cores)")
+    part.add_argument("--warm-backfit", action="store_true",
+                      help="only the iterative bases' backfitting from the last shape against "
+                           "a search from the grid every round (a few minutes)")
     part.add_argument("--cleanroom", action="store_true",
                       help="the clean-room effect matrix (tests/cleanroom/effects.py; 160 "
                            "sources at both strengths, about 1.5 h of one core)")
@@ -568,6 +614,8 @@ if __name__ == "__main__":
         print(json.dumps(base_independence(
             chosen_bases, tuple(p for p in args.plants.split(",") if p) or None,
             workers=args.workers), indent=1))
+    elif args.warm_backfit:
+        print(json.dumps(warm_backfit(), indent=1))
     elif args.cleanroom:
         res = cleanroom_matrix(
             plants=tuple(p for p in args.plants.split(",") if p) or None,
