@@ -402,11 +402,12 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
     with auto, and each base's agreement. Default cases: clean and every effect at strength 1.
 
     Two readings per base: ``first``, the given base's own answer (``base_check`` off), and
-    ``stage``, what the stage answers with its defaults (``base_misfit_fallback``): when that
-    base fits ``base_misfit_factor`` x worse plain than the best family, or its answer is
-    neither clean nor within ``base_retry_factor`` x the noise floor, and the best family's
-    model with its terms predicts ``workflow.min_relative_gain`` better than the base's with
-    its terms, the best family's answer, taken from that family's row.
+    ``stage``, what the stage answers with its defaults (``base_misfit_fallback``,
+    :func:`hysteresis.discrepancy.base_check.second_opinion`): when that base fits
+    ``base_misfit_factor`` x worse plain than the best family, or its answer is not within
+    ``base_retry_factor`` x the noise floor, and ``auto`` kept another base whose model with
+    its terms answers for it (:func:`~hysteresis.discrepancy.base_check.best_family_answers`),
+    ``auto``'s answer, taken from its row.
 
     ``python -m bench.bench_discrepancy --bases`` runs it alone (every plant: 6 workflows for
     each of 104 sources, several hours on 2 cores); ``--plants`` and ``--forms`` narrow it
@@ -453,6 +454,8 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
                                      base_check=False)
                 named = [e["name"] for e in rep["effects"]]
                 row[base] = {"first": named[0] if named else None, "named": named,
+                             "kept": next((t["base"] for t in rep["bases_tried"] or []
+                                           if t.get("kept")), base),
                              "verdict": rep["verdict"],
                              "heldout_rmse_before": rep["summary"]["heldout_rmse_before"],
                              "heldout_rmse_after": rep["summary"]["heldout_rmse_after"],
@@ -460,6 +463,7 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
                              "seconds": round(time.perf_counter() - t0, 1)}
             _, _, plain = choose_base(runs, families)
             best = min(plain, key=plain.__getitem__)
+            kept = row["auto"]["kept"]
             for base in BASES:
                 own = row[base]
                 asked = asks_best_family(
@@ -467,11 +471,11 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
                      "residual": {"rmse_over_noise": own["rmse_over_noise"]}},
                     plain_ratio=own["heldout_rmse_before"] / plain[best], factor=factor,
                     retry_factor=retry)
-                misfit = (base != best and asked and best_family_answers(
-                    own["heldout_rmse_after"], row[best]["heldout_rmse_after"],
-                    min_gain=min_gain))
+                misfit = (base != kept and asked and best_family_answers(
+                    own["heldout_rmse_after"], row["auto"]["heldout_rmse_after"],
+                    min_gain=min_gain, own_named=bool(own["named"]), best_plain=plain[best]))
                 row[base]["misfit"] = bool(misfit)
-                row[base]["stage"] = row[best]["first"] if misfit else row[base]["first"]
+                row[base]["stage"] = row["auto"]["first"] if misfit else row[base]["first"]
             auto = row["auto"]["first"]
             row["all_agree"] = all(row[b]["first"] == auto for b in BASES)
             row["all_agree_stage"] = all(row[b]["stage"] == auto for b in BASES)

@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 
 from hysteresis.base import HysteresisError
-from hysteresis.discrepancy.base_check import Workflow, base_misfit, second_opinion
+from hysteresis.discrepancy.base_check import base_misfit, second_opinion
 from hysteresis.discrepancy.errors import DiscrepancyError
 from hysteresis.discrepancy.headline import headline
-from hysteresis.discrepancy.ranking import pick_base, rank_bases, runs_lacking
+from hysteresis.discrepancy.ranking import Workflow, auto_base, rank_bases, runs_lacking
 from hysteresis.discrepancy.runs import RunData, chain_records, check_one_rig
 from hysteresis.discrepancy.workflow import (
     SESSION_GAIN,
@@ -41,16 +41,16 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
     workflow's full result (with the evaluations and groups the plots need).
 
     ``auto``: the workflow runs on the best of ``auto_families`` (plain held-out RMSE), and
-    again on the next best, up to ``max_bases``, while the result is neither clean nor
-    explained to within ``base_retry_factor`` x the noise floor; the base whose model with
-    its terms predicts the held-out runs best is kept (:func:`.ranking.pick_base`). The plain
+    again on the next best, up to ``max_bases``, while the result is not explained to within
+    ``base_retry_factor`` x the noise floor; the base whose model with its terms predicts
+    the held-out runs best is kept (:func:`.ranking.auto_base`). The plain
     ranking alone confounds the effect with the family: a family that bends to a hidden drift
     or stop wins plain and then leaves half of it, where the family that matches the mechanism
     plus the term explains it.
 
     A given base is checked against the best of ``auto_families`` (``base_check``): with
-    ``base_misfit_fallback`` by :func:`.base_check.second_opinion` (the best family answers
-    when its model with its terms predicts clearly better; ``given_base`` keeps the given
+    ``base_misfit_fallback`` by :func:`.base_check.second_opinion` (``auto``'s answer stands
+    in when its model with its terms predicts clearly better; ``given_base`` keeps the given
     base's answer), else by :func:`.base_check.base_misfit` (flagged only). Terms added to a
     base that cannot take the loop's shape stand in for the base's misfit, and the answer
     would depend on the base and not on the source.
@@ -70,9 +70,11 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
     auto_scores: dict[str, float] = {}
     tried: list[dict[str, Any]] = []
     if base_family == "auto":
-        full, params, auto_scores, tried = _auto_base(
-            workflow, runs, auto_families, max_bases=max_bases,
+        _, _, auto_scores, specs = rank_bases(runs, auto_families)
+        label, full, tried = auto_base(
+            workflow, auto_scores, specs, max_bases=max_bases,
             retry_factor=base_retry_factor, min_gain=st.min_relative_gain)
+        params = specs[label][1]
     else:
         params = dict(base_params or {})
         full = workflow(base_family, params)
@@ -83,7 +85,7 @@ def analyse(runs: list[RunData], *, base_family: str = "auto",
         report, full = second_opinion(
             runs, report, full, workflow, auto_families, base=base_family, params=params,
             factor=base_misfit_factor, retry_factor=base_retry_factor,
-            min_gain=st.min_relative_gain)
+            min_gain=st.min_relative_gain, max_bases=max_bases)
     elif not auto_scores and base_check:
         report["base_misfit"] = base_misfit(runs, report, auto_families,
                                             factor=base_misfit_factor)
@@ -211,33 +213,6 @@ def _workflow_on(runs: list[RunData], st: WorkflowSettings,
                             session=session)
 
     return workflow
-
-
-def _auto_base(workflow: Workflow, runs: list[RunData],
-               families: Mapping[str, Mapping[str, Any]], *, max_bases: int,
-               retry_factor: float, min_gain: float
-               ) -> tuple[dict[str, Any], dict[str, Any], dict[str, float],
-                          list[dict[str, Any]]]:
-    """``base_family=auto``: the workflow on the best plain families in turn, while the answer
-    is neither clean nor explained to ``retry_factor`` x the noise floor; returns (the kept
-    base's full result, its parameters, the plain scores, what each base tried answered)."""
-    _, _, scores, specs = rank_bases(runs, families)
-    results: list[tuple[str, dict[str, Any]]] = []
-    tried: list[dict[str, Any]] = []
-    for label in sorted(scores, key=scores.__getitem__)[:max(1, max_bases)]:
-        res = workflow(*specs[label])
-        results.append((label, res))
-        tried.append({"base": label, "verdict": res["verdict"],
-                      "effects": [e["name"] for e in res["effects"]],
-                      "heldout_rmse_after": res["summary"]["heldout_rmse_after"],
-                      "rmse_over_noise": res["residual"]["rmse_over_noise"]})
-        if res["verdict"] == "no_missing_effect" \
-                or res["residual"]["rmse_over_noise"] <= retry_factor:
-            break
-    label, full = pick_base(results, min_gain=min_gain)
-    for t in tried:
-        t["kept"] = t["base"] == label
-    return full, specs[label][1], scores, tried
 
 
 def _report(full: dict[str, Any], params: dict[str, Any], auto_scores: dict[str, float],

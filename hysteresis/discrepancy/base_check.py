@@ -1,86 +1,94 @@
 """A given base family checked against the best standard family: terms added to a base that
 cannot take the loop's shape stand in for the base's misfit, and the answer would depend on
-the base and not on the source. :func:`second_opinion` lets the best family answer when its
-model with its terms predicts clearly better; :func:`base_misfit` only flags. Pure: runs and
+the base and not on the source. :func:`second_opinion` lets ``auto``'s answer stand in when
+its model with its terms predicts clearly better; :func:`base_misfit` only flags. Pure: runs and
 reports in, reports out."""
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 from hysteresis.discrepancy.errors import DiscrepancyError
-from hysteresis.discrepancy.ranking import choose_base
+from hysteresis.discrepancy.ranking import Workflow, auto_base, choose_base, rank_bases
 from hysteresis.discrepancy.runs import RunData
 from hysteresis.discrepancy.workflow import strip_private
 
 log = logging.getLogger(__name__)
 
-#: The workflow on one base: (family name, its parameters) -> the workflow's full result.
-Workflow = Callable[[str, Mapping[str, Any]], dict[str, Any]]
-
 
 def asks_best_family(report: Mapping[str, Any], *, plain_ratio: float, factor: float,
                      retry_factor: float) -> bool:
-    """Whether a given base's answer (``report``) is checked on the best family: the base
-    fits ``factor`` x worse plain (``plain_ratio``), or its answer is neither clean nor within
-    ``retry_factor`` x the noise floor."""
-    unexplained = (report["verdict"] != "no_missing_effect"
-                   and float(report["residual"]["rmse_over_noise"]) > retry_factor)
-    return plain_ratio > factor or unexplained
+    """Whether a given base's answer (``report``) is checked on ``auto``'s: the base fits
+    ``factor`` x worse plain than the best family (``plain_ratio``), or its answer, clean or
+    not, is not explained to within ``retry_factor`` x the noise floor (what makes ``auto``
+    try a second base)."""
+    return plain_ratio > factor or float(report["residual"]["rmse_over_noise"]) > retry_factor
 
 
-def best_family_answers(own_after: float, best_after: float, *, min_gain: float) -> bool:
-    """Whether the best family's model with its terms predicts the held-out runs ``min_gain``
-    better than the given base's with its terms (held-out RMSEs after the terms)."""
-    return best_after < (1.0 - min_gain) * own_after
+def best_family_answers(own_after: float, best_after: float, *, min_gain: float,
+                        own_named: bool = False, best_plain: float = float("inf")) -> bool:
+    """Whether ``auto``'s model with its terms (held-out RMSE ``best_after``) answers for a
+    given base's with its terms (``own_after``): it predicts the held-out runs ``min_gain``
+    better; or it predicts better at all while the given base's terms (``own_named``) do not
+    even take it to the best family's plain fit (``best_plain``), so what they name stands in
+    for the base's misfit (on a Bouc-Wen plant the free Gamma sum plus an "asymmetry" left
+    0.0229 mm where Bouc-Wen plain left 0.0185)."""
+    if best_after < (1.0 - min_gain) * own_after:
+        return True
+    return own_named and own_after > best_plain and best_after < own_after
 
 
 def second_opinion(runs: list[RunData], report: dict[str, Any], full: dict[str, Any],
                    workflow: Workflow, families: Mapping[str, Mapping[str, Any]], *,
                    base: str, params: Mapping[str, Any], factor: float, retry_factor: float,
-                   min_gain: float) -> tuple[dict[str, Any], dict[str, Any]]:
-    """A given base checked against the best family plain (``base_misfit_fallback``).
+                   min_gain: float, max_bases: int = 2) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A given base checked against ``auto`` on the same families (``base_misfit_fallback``).
 
-    When the base fits ``factor`` x worse plain than the best family, or its answer is neither
-    clean nor explained to within ``retry_factor`` x the noise floor (what makes ``auto`` try
-    a second base), the workflow runs on the best family too; that family answers when its
-    model with its terms predicts the held-out runs ``min_gain`` better than the given base's
-    with its terms, and ``given_base`` keeps the given base's answer. Otherwise the given
-    base's answer stands: a base that fits worse plain only because it lacked the effect
-    predicts as well once the term is in."""
+    When the base fits ``factor`` x worse plain than the best family, or its answer is not
+    explained to within ``retry_factor`` x the noise floor (what makes ``auto`` try a second
+    base), ``auto`` runs too (:func:`.ranking.auto_base`: the best plain family, and the next
+    while the answer stays above that floor; the given base's own result is reused where it
+    is one of them). ``auto``'s answer stands in when its base is another family and
+    :func:`best_family_answers`; ``given_base`` then keeps the given base's answer.
+    Otherwise the given base's answer stands: a base that fits worse plain only because it
+    lacked the effect predicts as well once the term is in."""
     try:
-        _, _, scores = choose_base(runs, families)
+        _, _, scores, specs = rank_bases(runs, families)
     except DiscrepancyError:
         return report, full
-    label = min(scores, key=scores.__getitem__)
-    best_params = dict(families[label])
-    best = str(best_params.pop("family", label))
+    best_plain = min(scores, key=scores.__getitem__)
     own_plain = float(report["summary"]["heldout_rmse_before"])
     own_after = float(report["summary"]["heldout_rmse_after"])
-    ratio = own_plain / scores[label] if scores[label] > 0 else float("inf")
-    if (best, best_params) == (base, dict(params)) or not asks_best_family(
-            report, plain_ratio=ratio, factor=factor, retry_factor=retry_factor):
+    ratio = own_plain / scores[best_plain] if scores[best_plain] > 0 else float("inf")
+    if not asks_best_family(report, plain_ratio=ratio, factor=factor,
+                            retry_factor=retry_factor):
         return report, full
-    best_full = workflow(best, best_params)
+    known = {label: full for label, spec in specs.items() if spec == (base, dict(params))}
+    label, best_full, _ = auto_base(workflow, scores, specs, max_bases=max_bases,
+                                    retry_factor=retry_factor, min_gain=min_gain, known=known)
     best_after = float(best_full["summary"]["heldout_rmse_after"])
-    if not best_family_answers(own_after, best_after, min_gain=min_gain):
+    if label in known or not best_family_answers(
+            own_after, best_after, min_gain=min_gain, own_named=bool(report["effects"]),
+            best_plain=scores[best_plain]):
         return report, full
+    best, best_params = specs[label][0], dict(specs[label][1])
     given = {"base": base, "base_params": dict(params), "verdict": report["verdict"],
              "effects": [e["name"] for e in report["effects"]],
              "heldout_rmse_after": own_after,
              "rmse_over_noise": report["residual"]["rmse_over_noise"]}
     misfit = {"base": base, "heldout_rmse": own_plain, "best_family": label,
-              "best_heldout_rmse": scores[label], "ratio": ratio,
+              "best_heldout_rmse": scores[label], "ratio": own_plain / scores[label]
+              if scores[label] > 0 else float("inf"),
               "ratio_with_terms": own_after / best_after if best_after > 0 else float("inf"),
               "scores": scores}
     log.warning("base %s with its terms predicts this source %.1fx worse held out than %s with "
                 "its own: %s answers", base, misfit["ratio_with_terms"], label, label)
     out = strip_private(best_full)
-    out.update(base_params=best_params, base_selection=None, bases_tried=None,
-               base_misfit=misfit, given_base=given)
-    out["summary"]["heldout_rmse_best_plain"] = scores[label]
+    out.update(base_family=best, base_params=best_params, base_selection=None,
+               bases_tried=None, base_misfit=misfit, given_base=given)
+    out["summary"]["heldout_rmse_best_plain"] = scores[best_plain]
     return out, best_full
 
 
