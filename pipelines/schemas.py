@@ -322,11 +322,12 @@ class DiscrepancyConfig:
         # better than every family above
         "gamma_tension": {},
     })
-    #: auto: the workflow runs on the best plain family and, while its answer is neither clean
-    #: nor explained to within base_retry_factor x the noise floor, on the next best (up to
+    #: auto: the workflow runs on the best plain family and, while its answer (clean or not)
+    #: is not explained to within base_retry_factor x the noise floor, on the next best (up to
     #: max_bases); the base whose model with its terms predicts the held-out runs best is kept
-    #: (a later one must beat the first by workflow.min_relative_gain). The report's
-    #: bases_tried lists them.
+    #: (a later one must beat the first by workflow.min_relative_gain, and where the first
+    #: found nothing, reach base_retry_factor x the noise floor). The report's bases_tried
+    #: lists them.
     max_bases: int = 2
     base_retry_factor: float = 1.5
     #: With a base family given (not auto): also score the auto_families plain and check the
@@ -334,10 +335,11 @@ class DiscrepancyConfig:
     #: named on a base that cannot take the loop's shape may stand in for its misfit.
     base_check: bool = True
     base_misfit_factor: float = 1.5
-    #: A base that fits base_misfit_factor x worse plain, or whose answer is neither clean nor
-    #: within base_retry_factor x the noise floor, does not answer alone: the workflow runs on
-    #: the best family too, which answers when its model with its terms predicts the held-out
-    #: runs workflow.min_relative_gain better (report: given_base keeps the given base's
+    #: A base that fits base_misfit_factor x worse plain, or whose answer is not within
+    #: base_retry_factor x the noise floor, does not answer alone: auto runs too, and answers
+    #: when its base is another family whose model with its terms predicts the held-out runs
+    #: workflow.min_relative_gain better, or better at all where the given base's terms leave
+    #: it worse than the best family plain (report: given_base keeps the given base's
     #: answer). false: the given base's answer, flagged when even with its terms it fits
     #: base_misfit_factor x worse than the best family plain.
     base_misfit_fallback: bool = True
