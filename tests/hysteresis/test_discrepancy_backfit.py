@@ -3,6 +3,7 @@ accelerated alternation, each against the plain computation on small data."""
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 
 import numpy as np
@@ -126,6 +127,32 @@ def test_a_warm_refit_lands_where_a_fresh_fit_does(family, plant) -> None:
     warm_rmse = np.sqrt(np.mean((m.predict(u) - y2) ** 2))
     fresh_rmse = np.sqrt(np.mean((fresh.predict(u) - y2) ** 2))
     assert warm_rmse <= 1.02 * fresh_rmse, (warm_rmse, fresh_rmse)
+
+
+def test_a_preisach_warm_refit_reuses_the_relay_rows_of_the_same_input(monkeypatch) -> None:
+    # the relay states depend on the input and the plane only: a second warm refit on the
+    # same input must not run them again, and lands where one without the kept rows does
+    import hysteresis.preisach as preisach
+
+    u, y = _smooth_record(plant="preisach")
+    factory = base_factory_for("preisach", screen=False)
+    calls = []
+    real = preisach.relay_states
+    monkeypatch.setattr(preisach, "relay_states", lambda *a: calls.append(1) or real(*a))
+    m = factory().fit(u, y)
+    for k in (1, 2, 3):
+        m.refit_warm(u, y + 0.01 * k * np.sin(np.linspace(0.0, 7.0, y.size)))
+    assert len(calls) == 2  # the fit, and the first warm refit; the next two reuse its rows
+    m.refit_warm(u[:-50], y[:-50])  # another input: computed again
+    assert len(calls) == 3
+    m.refit_warm(u, y)
+    twin = copy.deepcopy(m)
+    del twin._relay_cache
+    y3 = y + 0.03 * np.sin(np.linspace(0.0, 7.0, y.size))
+    m.refit_warm(u, y3)
+    twin.refit_warm(u, y3)
+    assert len(calls) == 5  # the input changed back once (m), and the twin had no rows kept
+    assert np.allclose(m.predict(u), twin.predict(u), rtol=0, atol=1e-9 * np.ptp(y))
 
 
 def test_a_warm_refit_keeps_a_loaded_start_chosen_on_the_record() -> None:
