@@ -65,6 +65,17 @@ def _answer(verdict: str, effects: list[str], before: float, after: float,
             "residual": {"rmse_over_noise": over_noise}, "_models": {}}
 
 
+def _stub_workflow(answer: dict[str, Any]) -> tuple[Any, list[str]]:
+    """A workflow that answers ``answer`` on any base, and the bases it was asked about."""
+    asked: list[str] = []
+
+    def workflow(name: str, params: Any) -> dict[str, Any]:
+        asked.append(name)
+        return answer
+
+    return workflow, asked
+
+
 @pytest.mark.parametrize("own_verdict, over_noise, own_after, best_after, answers", [
     # fits about as well plain, but leaves 12x the noise: auto is asked, and answers when its
     # model with its terms predicts clearly better (held-out RMSEs in the best plain's units)
@@ -82,12 +93,8 @@ def test_a_base_that_leaves_a_residual_gets_a_second_opinion(
     runs = injected_runs("gamma", {})
     _, _, plain = choose_base(runs, families)
     best = min(plain, key=plain.__getitem__)
-    asked: list[str] = []
-
-    def workflow(name: str, params: Any) -> dict[str, Any]:
-        asked.append(name)
-        return _answer("missing_effects_found", ["rate_dependence"], plain[best],
-                       best_after * plain[best], 1.1)
+    workflow, asked = _stub_workflow(_answer("missing_effects_found", ["rate_dependence"],
+                                             plain[best], best_after * plain[best], 1.1))
 
     own = _answer(own_verdict, ["time_delay"] if own_verdict != "no_missing_effect" else [],
                   1.2 * plain[best], own_after * plain[best], over_noise)
@@ -115,11 +122,8 @@ def test_the_second_opinion_reuses_the_given_base_and_lets_it_stand_when_auto_ke
     runs = injected_runs("gamma", {})
     _, _, plain = choose_base(runs, families)
     ranked = sorted(plain, key=plain.__getitem__)
-    asked: list[str] = []
-
-    def workflow(name: str, params: Any) -> dict[str, Any]:
-        asked.append(name)
-        return _answer("unexplained", [], plain[ranked[1]], plain[ranked[1]], 4.0)
+    workflow, asked = _stub_workflow(
+        _answer("unexplained", [], plain[ranked[1]], plain[ranked[1]], 4.0))
 
     spec = dict(families[ranked[0]])
     name = str(spec.pop("family", ranked[0]))
