@@ -326,8 +326,9 @@ class DiscrepancyConfig:
     #: is not explained to within base_retry_factor x the noise floor, on the next best (up to
     #: max_bases); the base whose model with its terms predicts the held-out runs best is kept
     #: (a later one must beat the first by workflow.min_relative_gain, and where the first
-    #: found nothing, reach base_retry_factor x the noise floor). The report's bases_tried
-    #: lists them.
+    #: found nothing, reach base_retry_factor x the noise floor: a base tried after a clean
+    #: answer stops after its first round unless one term alone comes within twice that).
+    #: The report's bases_tried lists them.
     max_bases: int = 2
     base_retry_factor: float = 1.5
     #: With a base family given (not auto): also score the auto_families plain and check the

@@ -204,13 +204,14 @@ def _workflow_on(runs: list[RunData], st: WorkflowSettings,
                  session: list[RunData] | None = None) -> Workflow:
     """The workflow on ``runs`` as a function of the base (family name, parameters)."""
 
-    def workflow(name: str, params: Mapping[str, Any]) -> dict[str, Any]:
+    def workflow(name: str, params: Mapping[str, Any], *,
+                 reach_within: float | None = None) -> dict[str, Any]:
         try:
             factory = base_factory_for(name, **params)
         except HysteresisError as err:
             raise DiscrepancyError(str(err)) from None
         return run_workflow(runs, factory, base_name=name, settings=st, model_error=model_error,
-                            session=session)
+                            session=session, reach_within=reach_within)
 
     return workflow
 

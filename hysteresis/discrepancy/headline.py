@@ -48,7 +48,9 @@ def _bases_tried(report: Mapping[str, Any]) -> str:
         return ""
     plain = min(report["base_selection"], key=report["base_selection"].__getitem__)
     others = "; ".join(" + ".join([t["base"], *t["effects"]])
-                       + f" {t['heldout_rmse_after']:.4g}" for t in tried)
+                       + f" {t['heldout_rmse_after']:.4g}"
+                       + (" (no term alone near the noise: not searched further)"
+                          if t.get("stopped") else "") for t in tried)
     return (f"; base chosen with its terms (best plain family: {plain}; held-out RMSE "
             f"after the terms: {others})")
 

@@ -20,6 +20,7 @@ take are scored once more and reported as ``measured_within_reach``: named, not 
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
@@ -52,6 +53,8 @@ from hysteresis.discrepancy.library import screen
 from hysteresis.discrepancy.locate import autocorrelation, locate
 from hysteresis.discrepancy.parallel import map_ordered
 from hysteresis.discrepancy.runs import RunData, concat_runs
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -373,18 +376,21 @@ SESSION_GAIN = 0.1
 def run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_name: str,
                  settings: WorkflowSettings | None = None,
                  model_error: dict[str, FloatArray] | None = None,
-                 session: Sequence[RunData] | None = None) -> dict[str, Any]:
+                 session: Sequence[RunData] | None = None,
+                 reach_within: float | None = None) -> dict[str, Any]:
     """The whole workflow (see :func:`_run_workflow`), BLAS pinned to one thread: the problems
     are thousands of tiny least-squares solves where threads only add contention."""
     with single_thread_blas(), memoised_fits():
         return _run_workflow(runs, base_factory, base_name=base_name, settings=settings,
-                             model_error=model_error, session=session)
+                             model_error=model_error, session=session,
+                             reach_within=reach_within)
 
 
 def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_name: str,
                   settings: WorkflowSettings | None = None,
                   model_error: dict[str, FloatArray] | None = None,
-                  session: Sequence[RunData] | None = None) -> dict[str, Any]:
+                  session: Sequence[RunData] | None = None,
+                  reach_within: float | None = None) -> dict[str, Any]:
     """The whole workflow; returns the report dict (plus ``_models``/``_evaluations`` for plots).
 
     ``model_error`` optionally maps identification run ids to a model-error signal (the UKF's
@@ -398,6 +404,13 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     round's comparison until then).
     A plain base may miss it while an effect it lacks (a speed term at a run's first sample)
     hides the state the earlier runs left.
+
+    ``reach_within``: the workflow stops after scoring its first round's candidates when none
+    of them alone brings the held-out RMSE within this many times the noise floor (report:
+    ``stopped``; nothing named, no pair searched). For a base asked only whether one term
+    explains the source to the noise (:func:`.ranking.auto_base` after a clean answer above
+    it), the later rounds were most of its cost and, one term short, are not expected to
+    get there.
     """
     st = settings or WorkflowSettings()
     groups = group_runs(runs)
@@ -421,6 +434,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     load_cells = {n: corroboration(n, [g.ident for g in groups]) for n in remaining}
     # The last round's scores, while they were made against the model as it stands.
     final_scores: dict[str, dict[str, Any]] = {}
+    stopped: dict[str, Any] | None = None
     for round_ in range(st.max_effects + 1):
         if session is not None and not any(j["joined"] for j in joins) and (
                 switched := _joined_session(session, evaluations, groups, round_, joins)):
@@ -432,9 +446,8 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         model_name = "+".join([base_name, *[e["name"] for e in effects]])
         located.append({"round": round_, "model": model_name, **_compact_locate(loc)})
         _, e_h = current.errors(groups)
-        if round_ == st.max_effects or not remaining:
-            break
-        if _rmse(e_h) <= st.noise_factor * loc["noise_floor"]:
+        if round_ == st.max_effects or not remaining \
+                or _rmse(e_h) <= st.noise_factor * loc["noise_floor"]:
             break
         n_eff = float(sum(effective_n(r.y - current.held_pred[r.run_id])
                           for g in groups for r in g.heldout))
@@ -443,6 +456,9 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         rankings.append([_public(s) for s in scores])
         screens.append(_screen(groups, current, remaining))
         final_scores = {s["name"]: s for s in scores}
+        if reach_within is not None and round_ == 0 and (
+                stopped := _out_of_reach(scores, loc["noise_floor"], reach_within)):
+            break
         added = _winners(scores, st, len(effects), loc["rmse_over_noise"],
                          partial(_best_pair, scores, base_factory, groups, current, n_eff,
                                  load_cells, st))
@@ -460,15 +476,14 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
                                          model_error, forms))
             for g in groups:
                 terms[g.key] = list(chosen["models"][g.key].terms)
-            models = chosen["models"]
-            current = chosen["after"]
+            models, current = chosen["models"], chosen["after"]
             evaluations.append(current)
             remaining.remove(chosen["name"])
             final_scores = {}
     measured = (_measured_within_reach(remaining, load_cells, base_factory, groups, terms,
                                        current, base_name, [e["name"] for e in effects], st,
                                        final_scores)
-                if st.physical_evidence else [])
+                if st.physical_evidence and stopped is None else [])
     return _assemble(groups, evaluations, all_runs, base_name, effects, st, models, {
         "located": located, "within_base_reach": within, "measured_within_reach": measured,
         "within_base_reach_note": _reach_note(within, base_name),
@@ -476,7 +491,25 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
         "candidates_skipped": {n: "needs a channel the runs do not carry (tension)"
                                for n in skipped},
         "candidates_failed": failed, "rankings": rankings, "library_screen": screens,
-        "runs_joined": joins})
+        "runs_joined": joins, "stopped": stopped})
+
+
+def _out_of_reach(scores: Sequence[Mapping[str, Any]], noise_floor: float,
+                  reach_within: float) -> dict[str, Any] | None:
+    """Why the workflow stops after its first round (:func:`_run_workflow`'s ``reach_within``):
+    no candidate alone brings the held-out RMSE within ``reach_within`` x ``noise_floor``.
+    None when one does (or none could be scored: nothing to judge by)."""
+    if not scores or noise_floor <= 0:
+        return None
+    best = min(scores, key=lambda s: float(s["heldout_rmse_after"]))
+    over = float(best["heldout_rmse_after"]) / noise_floor
+    if over <= reach_within:
+        return None
+    note = (f"stopped after the first round: no term alone brings the held-out RMSE within "
+            f"{reach_within:g}x the noise floor (best: {best['name']}, {over:.2g}x)")
+    log.info(note)
+    return {"round": 0, "best": best["name"], "best_over_noise": over,
+            "reach_within": reach_within, "note": note}
 
 
 def _check_candidates(names: Sequence[str]) -> None:
@@ -581,6 +614,7 @@ def _assemble(groups: Sequence[Group], evaluations: list[Evaluation],
         "rankings": parts["rankings"],
         "library_screen": parts["library_screen"],
         "runs_joined": parts["runs_joined"],
+        "stopped": parts["stopped"],
         "summary": {
             "configurations": [g.key for g in groups],
             "identification_runs": [g.ident.run_id for g in groups],

@@ -12,7 +12,7 @@ from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.base_check import base_misfit, second_opinion
 from hysteresis.discrepancy.headline import headline
 from hysteresis.discrepancy.inject import SIZES, injected_runs
-from hysteresis.discrepancy.ranking import choose_base, pick_base
+from hysteresis.discrepancy.ranking import ABSORBED_REACH, auto_base, choose_base, pick_base
 from hysteresis.discrepancy.workflow import base_factory_for, run_workflow
 
 
@@ -69,9 +69,14 @@ def _stub_workflow(answer: dict[str, Any]) -> tuple[Any, list[str]]:
     """A workflow that answers ``answer`` on any base, and the bases it was asked about."""
     asked: list[str] = []
 
-    def workflow(name: str, params: Any) -> dict[str, Any]:
+    def workflow(name: str, params: Any, *, reach_within: float | None = None
+                 ) -> dict[str, Any]:
         asked.append(name)
+        reaches.append(reach_within)
         return answer
+
+    reaches: list[float | None] = []
+    workflow.reaches = reaches  # type: ignore[attr-defined]
 
     return workflow, asked
 
@@ -211,7 +216,45 @@ def test_an_effect_the_best_plain_family_absorbs_is_found_on_the_next(
         ("asymmetry", "pull_push_gain")]
     assert rep["residual"]["rmse_over_noise"] < 1.5
     assert rep["summary"]["heldout_reduction_vs_best_plain"] >= 0.4
+    assert second["stopped"] is None  # asked after a clean answer, and one term reached it
     params = {k: v for k, v in pair["preisach"].items() if k != "family"}
     given, _ = analyse(runs, base_family="preisach", base_params=params, auto_families=pair)
     assert given["given_base"]["base"] == "preisach" and given["given_base"]["effects"] == []
     assert [e["name"] for e in given["effects"]][:1] == ["asymmetry"]
+
+
+def test_a_base_tried_after_a_clean_answer_is_asked_for_one_term_near_the_noise() -> None:
+    """auto after a clean answer above the retry bar: the next base only matters if a term
+    explains the source to the noise, so its workflow is told to stop after the first round
+    unless one term alone comes within ABSORBED_REACH x the bar. After an answer with effects
+    (or an unexplained one) the next base runs in full."""
+    ranked = {"preisach": 1.0, "bouc_wen": 2.0}
+    specs = {"preisach": ("preisach", {}), "bouc_wen": ("bouc_wen", {})}
+    for first, reach in [(_answer("no_missing_effect", [], 1.0, 1.0, 2.3), 3.0),
+                         (_answer("missing_effects_found", ["drift"], 1.0, 0.5, 2.3), None),
+                         (_answer("unexplained", [], 1.0, 1.0, 8.0), None)]:
+        workflow, asked = _stub_workflow(_answer("unexplained", [], 2.0, 2.0, 6.0))
+        label, _, tried = auto_base(workflow, ranked, specs, max_bases=2, retry_factor=1.5,
+                                    min_gain=0.2, known={"preisach": first})
+        assert asked == ["bouc_wen"] and label == "preisach"
+        assert workflow.reaches == [None if reach is None else ABSORBED_REACH * 1.5]
+        assert [t["stopped"] for t in tried] == [None, None]
+
+
+def test_the_workflow_stops_after_its_first_round_when_no_term_comes_near_the_noise() -> None:
+    """``reach_within``: a latency on the Gamma plant is named as usual when its term reaches
+    the bar, and with a bar no term reaches the workflow stops after scoring the first round:
+    nothing named, the reason in the report."""
+    runs = injected_runs("gamma", {"time_delay": 1.0})
+    factory = base_factory_for("gamma")
+    full = run_workflow(runs, factory, base_name="gamma", reach_within=1e6)
+    assert [e["name"] for e in full["effects"]] == ["time_delay"] and full["stopped"] is None
+    best = min(s["heldout_rmse_after"] for s in full["rankings"][0])
+    floor = full["located"][0]["noise_floor"]
+    bar = 0.5 * best / floor  # half of what the best term reaches
+    cut = run_workflow(runs, factory, base_name="gamma", reach_within=bar)
+    assert cut["effects"] == [] and len(cut["rankings"]) == 1
+    assert cut["stopped"]["best"] == "time_delay"
+    assert cut["stopped"]["best_over_noise"] == pytest.approx(2.0 * bar)
+    assert cut["verdict"] == "unexplained"
+    assert cut["rankings"][0] == full["rankings"][0]
