@@ -79,6 +79,28 @@ def corroboration(name: str, idents: Sequence[RunData]) -> dict[str, Any]:
 SPEED_SHARE = 0.8
 
 
+#: An output tension that an affine map of the output explains to this share of its variance
+#: (R^2) carries nothing the output does not (a spring follower: ``T_out = F0 + k y``), so a
+#: term on it is a static curve of the output.
+FOLLOWS_OUTPUT_R2 = 0.99
+
+
+def output_tension_follows(idents: Sequence[RunData]) -> float | None:
+    """The least R^2 over the identification runs of the output tension regressed on
+    ``a + b y`` (the output), or None without an output tension. Near 1: the follower's load is
+    a function of its position alone, and the tension adds no channel to the output."""
+    shares = []
+    for run in idents:
+        if run.tension_out is None:
+            return None
+        t = run.tension_out
+        x = np.column_stack([np.ones(run.n), run.y])
+        coef, *_ = np.linalg.lstsq(x, t, rcond=None)
+        var = float(np.sum((t - t.mean()) ** 2))
+        shares.append(1.0 - float(np.sum((t - x @ coef) ** 2)) / var if var > 0 else 0.0)
+    return min(shares) if shares else None
+
+
 def tension_speed_share(idents: Sequence[RunData], *, n_plays: int = 7) -> float | None:
     """How much of the input tension the input speed explains beyond a rate-independent map.
 

@@ -10,7 +10,9 @@ guess. The workflow then answers with the class:
   stands still for the dead travel after every reversal, :mod:`.backlash`).
 * ``saturation or tendon_elongation``: a stretch with the square of the output tension, which
   follows the output through the follower's spring, is a static curvature of the output, as a
-  soft stop or a cubic softening is; the output tension separates them.
+  soft stop or a cubic softening is; the output tension separates them only where it is more
+  than an affine function of the output (a spring follower's ``T_out = F0 + k y`` is not: its
+  square is a quadratic of the output, which a plant's own asymmetric loop also is).
 
 Each class is a set of ``(effect, form)`` pairs (``form`` None: every form of the effect) and the
 load-cell claim that separates its members when the runs carry the channel.
@@ -45,24 +47,38 @@ def class_of(name: str, form: str) -> str | None:
     return None
 
 
-def statement(effect: Mapping[str, Any], channels: set[str] | frozenset[str]
-              ) -> dict[str, Any] | None:
+def statement(effect: Mapping[str, Any], channels: set[str] | frozenset[str], *,
+              follows_output: float | None = None) -> dict[str, Any] | None:
     """The identifiability answer for the first effect named (``effect``: a report entry with
     its ``name``, ``form`` and ``evidence``; ``channels``: the tension channels every run
     carries): None when it stands alone, else the class, its members and why it is not
     split. With the separating channel present the class splits: through a load-cell reading
     that shows the named member's claim (a reading that does not leaves the class), or, for a
-    class without a reading, through the term on that channel, which competed in the fit."""
+    class without a reading, through the term on that channel, which competed in the fit;
+    unless that channel is the output tension and it follows the output (``follows_output``:
+    :func:`.evidence.output_tension_follows`, at least :data:`.evidence.FOLLOWS_OUTPUT_R2`),
+    when the term on it is only another curve of the output. (On clean-room sources with a
+    spring follower, a stretch with the output tension's square was named alone on a clean
+    generalised Prandtl-Ishlinskii plant whose loop is asymmetric, on a clean tendon-sheath
+    and on viscous terms, and never where it was hidden.)"""
+    from hysteresis.discrepancy.evidence import FOLLOWS_OUTPUT_R2
+
     label = class_of(str(effect["name"]), str(effect.get("form", "")))
     if label is None:
         return None
     members, claim, channel, text = CLASSES[label]
     present = channel in channels
+    follows = (claim is None and channel == "tension_out" and follows_output is not None
+               and follows_output >= FOLLOWS_OUTPUT_R2)
     ev = (effect.get("evidence") or {}).get("load_cell_evidence") or {}
-    if present and (claim is None or (ev.get("claim") == claim and ev.get("corroborated"))):
+    if present and not follows and (
+            claim is None or (ev.get("claim") == claim and ev.get("corroborated"))):
         return None
     names = sorted({m[0] for m in members})
     why = (f"not separable without {text}" if not present else
+           f"not separable on these runs: {text} follows the output (an affine function of "
+           f"it, R^2 {follows_output:.3f}), so a term on it is a static curve of the output"
+           if follows else
            f"not separable on these runs: {text} does not show the {str(claim).replace('_', ' ')} "
            "that would tell them apart")
     return {"class": names, "label": label, "named": effect["name"], "form": effect.get("form"),

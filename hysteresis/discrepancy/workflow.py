@@ -47,7 +47,11 @@ from hysteresis.discrepancy.effects import (
     only_forms,
     screened_sse,
 )
-from hysteresis.discrepancy.evidence import corroboration, tension_speed_share
+from hysteresis.discrepancy.evidence import (
+    corroboration,
+    output_tension_follows,
+    tension_speed_share,
+)
 from hysteresis.discrepancy.identifiability import force_statement, statement
 from hysteresis.discrepancy.library import screen
 from hysteresis.discrepancy.locate import autocorrelation, locate
@@ -636,7 +640,9 @@ def _identifiability(effects: list[dict[str, Any]], channels: set[str],
     a tension carrying a speed-dependent force."""
     if not effects:
         return None
-    fixed = statement(effects[0], channels)
+    fixed = statement(effects[0], channels,
+                      follows_output=output_tension_follows([g.ident for g in groups])
+                      if "tension_out" in channels else None)
     if fixed is not None or effects[0]["name"] != "tendon_elongation":
         return fixed
     return force_statement(effects[0], tension_speed_share([g.ident for g in groups]),

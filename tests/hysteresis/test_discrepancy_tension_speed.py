@@ -1,4 +1,5 @@
-"""A stretch named on a tension that carries a speed-dependent force is answered with its class."""
+"""A stretch named on a tension that carries a speed-dependent force, or on an output tension that
+follows the output, is answered with its class."""
 
 from __future__ import annotations
 
@@ -6,8 +7,13 @@ import numpy as np
 import pytest
 
 from hysteresis.discrepancy._ops import play
-from hysteresis.discrepancy.evidence import SPEED_SHARE, tension_speed_share
-from hysteresis.discrepancy.identifiability import force_statement
+from hysteresis.discrepancy.evidence import (
+    FOLLOWS_OUTPUT_R2,
+    SPEED_SHARE,
+    output_tension_follows,
+    tension_speed_share,
+)
+from hysteresis.discrepancy.identifiability import force_statement, statement
 from hysteresis.discrepancy.runs import RunData
 
 
@@ -58,3 +64,37 @@ def test_the_class_needs_both_the_tension_and_a_rival(share: float | None, rival
     if out is not None:
         assert out["class"] == ["rate_dependence", "tendon_elongation"]
         assert out["statement"].startswith("rate_dependence or tendon_elongation: ")
+
+
+def _follower(spring: bool) -> RunData:
+    """A run whose output tension is a return spring's (``F0 + k y``) or a constant force's."""
+    run = _run(0.0)
+    rng = np.random.default_rng(1)
+    y = 0.85 * run.u
+    load = 5.0 + 0.3 * y if spring else np.full(run.n, 5.0)
+    return RunData(run_id="r", t=run.t, u=run.u, y=y,
+                   tension_out=load + rng.normal(0, 0.01, run.n))
+
+
+def test_a_spring_followers_tension_follows_the_output() -> None:
+    spring = output_tension_follows([_follower(True)])
+    constant = output_tension_follows([_follower(False)])
+    assert spring is not None and spring > FOLLOWS_OUTPUT_R2
+    assert constant is not None and constant < 0.1
+    assert output_tension_follows([_run(0.0)]) is None  # no output tension
+
+
+@pytest.mark.parametrize(("follows", "classed"), [(0.9999, True), (0.5, False), (None, False)])
+def test_a_stretch_on_an_output_tension_that_follows_the_output_keeps_its_class(
+        follows: float | None, classed: bool) -> None:
+    """A stretch with the square of a spring follower's tension is a quadratic of the output:
+    the output tension does not split it from a static curvature (or the plant's own
+    asymmetric loop). A tension that carries more than the output does."""
+    entry = {"name": "tendon_elongation", "form": "square_output", "evidence": {}}
+    out = statement(entry, {"tension", "tension_out"}, follows_output=follows)
+    assert (out is not None) is classed
+    if out is not None:
+        assert out["label"] == "saturation or tendon_elongation"
+        assert "the output tension follows the output" in out["statement"]
+    # without the channel the class stands whatever the reading
+    assert statement(entry, {"tension"}, follows_output=follows) is not None
