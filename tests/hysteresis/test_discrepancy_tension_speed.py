@@ -15,6 +15,7 @@ from hysteresis.discrepancy.evidence import (
 )
 from hysteresis.discrepancy.identifiability import force_statement, statement
 from hysteresis.discrepancy.runs import RunData
+from tests.cleanroom import load
 
 
 def _run(force_per_speed: float) -> RunData:
@@ -98,3 +99,21 @@ def test_a_stretch_on_an_output_tension_that_follows_the_output_keeps_its_class(
         assert "the output tension follows the output" in out["statement"]
     # without the channel the class stands whatever the reading
     assert statement(entry, {"tension"}, follows_output=follows) is not None
+
+
+@pytest.mark.parametrize("plant", ["GPIPlant", "LuGrePlant"])
+def test_the_cleanroom_spring_follower_leaves_the_output_tension_nothing_new(plant: str) -> None:
+    """On the tenth clean-room generator's plants (``tests/cleanroom/absorbed_effects.py``,
+    written without our code: a generalised Prandtl-Ishlinskii sum with different up and down
+    envelopes, a LuGre tendon-sheath), a return-spring follower's tension is read as following
+    the output, so a stretch on its square stays a class there."""
+    generator = load("absorbed_effects")
+    model = generator.calibrate(getattr(generator, plant)())
+    t = np.arange(0.0, 20.0, 0.04)
+    u = 6.0 * np.sin(2 * np.pi * 0.2 * t) * np.exp(-t / 20.0)
+    out = model.simulate(u, start="loaded", h=0.04)
+    rng = np.random.default_rng(2)
+    run = RunData(run_id="r", t=t, u=u, y=out["y"] + rng.normal(0, 0.01, t.size),
+                  tension=out["t_in"], tension_out=out["t_out"] + rng.normal(0, 0.01, t.size))
+    follows = output_tension_follows([run])
+    assert follows is not None and follows >= FOLLOWS_OUTPUT_R2
