@@ -40,6 +40,25 @@ def test_a_play_sum_with_a_negative_weight_started_after_a_pull_is_recovered() -
     assert np.sqrt(np.mean((rough.predict(u) - y) ** 2)) > 0.05
 
 
+def test_the_kept_pseudo_inverse_solves_as_least_squares_does() -> None:
+    """The signed screen re-solves its design for each new output with the pseudo-inverse it
+    kept: the weights are numpy's least-squares ones, also for a rank-deficient design (two
+    equal thresholds) and after the input changes (a new design, a new inverse)."""
+    u = _input()
+    rng = np.random.default_rng(3)
+    for thresholds in (R, (0.0, 0.5, 0.5, 1.5)):
+        model = PlaySumModel(thresholds=thresholds, signed=True, start=1.0)
+        model.fit(u, rng.normal(size=u.size))
+        for uu in (u, 0.7 * u):
+            y = sum(play(uu, r) for r in R) + rng.normal(0, 0.01, uu.size)
+            model.refit_weights(uu, y)
+            a = model._design(uu, model.thresholds_)
+            w, *_ = np.linalg.lstsq(a, y, rcond=None)
+            np.testing.assert_allclose(np.r_[model.weights_, model.offset_], w,
+                                       atol=1e-9 * float(np.abs(w).max()))
+            assert model._pinv_for[0] is model._design_for[1]
+
+
 def test_a_start_outside_the_band_is_refused_with_its_meaning() -> None:
     u = _input()
     with pytest.raises(HysteresisError, match=r"start must lie in \[-1, 1\].*got 2"):
