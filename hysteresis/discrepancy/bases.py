@@ -98,19 +98,22 @@ class PlaySumModel(HysteresisModel):
         thresholds kept; the play columns reused when ``u`` is the input of the last solve)."""
         self.check_fitted()
         uu, yy = check_pair(u, y)
-        cached: tuple[FloatArray, FloatArray] | None = getattr(self, "_design_for", None)
-        if cached is not None and cached[0].shape == uu.shape and np.array_equal(cached[0], uu):
-            a = cached[1]
-        else:
-            a = self._design(uu, self.thresholds_)
+        a = self._design_on(uu)
         self._solve(a, yy)
         self._design_for = (uu, a)
         return self
 
+    def _design_on(self, uu: FloatArray) -> FloatArray:
+        """The play columns on ``uu``: those of the last solve when ``uu`` is its input (a
+        backfitting loop refits and predicts on one input thousands of times)."""
+        cached: tuple[FloatArray, FloatArray] | None = getattr(self, "_design_for", None)
+        if cached is not None and cached[0].shape == uu.shape and np.array_equal(cached[0], uu):
+            return cached[1]
+        return self._design(uu, self.thresholds_)
+
     def predict(self, u: Any, *, state: Any = None) -> FloatArray:
         self.check_fitted()
-        uu = as_1d(u, "u")
-        a = self._design(uu, self.thresholds_)
+        a = self._design_on(as_1d(u, "u"))
         return np.asarray(a @ np.r_[self.weights_, self.offset_], dtype=np.float64)
 
 

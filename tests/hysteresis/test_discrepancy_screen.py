@@ -57,6 +57,9 @@ def test_the_kept_pseudo_inverse_solves_as_least_squares_does() -> None:
             np.testing.assert_allclose(np.r_[model.weights_, model.offset_], w,
                                        atol=1e-9 * float(np.abs(w).max()))
             assert model._pinv_for[0] is model._design_for[1]
+            # its prediction on that input reuses the columns: the same as computed afresh
+            np.testing.assert_array_equal(model.predict(uu.copy()),
+                                          a @ np.r_[model.weights_, model.offset_])
 
 
 def test_a_start_outside_the_band_is_refused_with_its_meaning() -> None:
