@@ -59,8 +59,8 @@ def statement(effect: Mapping[str, Any], channels: set[str] | frozenset[str], *,
     :func:`.evidence.output_tension_follows`, at least :data:`.evidence.FOLLOWS_OUTPUT_R2`),
     when the term on it is only another curve of the output. (On clean-room sources with a
     spring follower, a stretch with the output tension's square was named alone on a clean
-    generalised Prandtl-Ishlinskii plant whose loop is asymmetric, on a clean tendon-sheath
-    and on viscous terms, and never where it was hidden.)"""
+    generalised Prandtl-Ishlinskii plant whose loop is asymmetric, a clean tendon-sheath and
+    rate terms, and never where it was hidden.)"""
     from hysteresis.discrepancy.evidence import FOLLOWS_OUTPUT_R2
 
     label = class_of(str(effect["name"]), str(effect.get("form", "")))
