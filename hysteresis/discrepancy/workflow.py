@@ -1009,6 +1009,12 @@ BASE_DEFAULTS: dict[str, dict[str, Any]] = {
 #: start. A plant that starts loaded is then clean, not ``unexplained``.
 STARTS_AT_REST = ("bouc_wen", "coleman_hodgdon")
 
+#: Effects a base searches on itself, not on its play-sum screen: a backlash in front of a
+#: play sum is a wider play, so the screen fits every width alike, while a smooth loop (Bouc-Wen,
+#: Coleman-Hodgdon) behind a backlash is not itself (a Preisach plane's relays shift with it).
+SCREEN_UNSEEN: dict[str, tuple[str, ...]] = {"bouc_wen": ("dead_zone",),
+                                             "coleman_hodgdon": ("dead_zone",)}
+
 #: Bases identified in closed form (a least-squares solve): fast enough to search an effect's
 #: parameter on themselves. Any other base searches on ``play_sum`` (see ``screen``).
 FAST_BASES = ("gamma", "linear", "play_sum", "affine")
@@ -1038,5 +1044,5 @@ def base_factory_for(name: str, *, screen: bool = True,
     if name in STARTS_AT_REST:
         real = lambda: FromRecordStart(family)  # noqa: E731
     if screen and name not in FAST_BASES:
-        return ScreenedFactory(real, PlaySumModel)
+        return ScreenedFactory(real, PlaySumModel, unseen=SCREEN_UNSEEN.get(name, ()))
     return real
