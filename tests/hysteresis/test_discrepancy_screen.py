@@ -146,3 +146,20 @@ def test_a_latency_the_screen_places_a_step_off_is_walked_to_its_size() -> None:
     assert float(m.terms[-1].theta) == pytest.approx(0.12, abs=0.015)
     plain = ComposedModel(factory, []).fit(ident)
     assert _sse(m, ident) < 0.05 * _sse(plain, ident)
+
+
+def test_a_smooth_base_searches_a_backlash_in_front_of_it_itself() -> None:
+    """A backlash in front of a play sum is a wider play: the play-sum screen fits every width
+    alike. A textbook Bouc-Wen behind a 1 mm backlash (the injector's): the Bouc-Wen base
+    searches the width itself and fits to the noise; the screen's width alone leaves far
+    more."""
+    ident = injected_runs("bouc_wen_loop", {"dead_zone": 2.0}, start="rest", seed=0)[0]
+    dead_zone = CANDIDATES["dead_zone"]
+    factory = base_factory_for("bouc_wen")
+    assert isinstance(factory, ScreenedFactory) and "dead_zone" in factory.unseen
+    own = fit_joint(factory, [], dead_zone, ident)
+    assert own.terms[-1].theta == pytest.approx(1.0, abs=0.05)  # total width, mm
+    assert np.sqrt(_sse(own, ident) / ident.y.size) < 0.0125  # noise sd 0.01 mm
+    screened = ScreenedFactory(factory.base, PlaySumModel)
+    rough = fit_joint(screened, [], dead_zone, ident)
+    assert _sse(rough, ident) > 4.0 * _sse(own, ident)
