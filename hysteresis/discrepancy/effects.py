@@ -16,7 +16,7 @@ joint fit. :class:`ComposedModel` is base family + terms, fitted jointly by back
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, replace
@@ -1463,12 +1463,12 @@ class ScreenedFactory:
     and weight signs that fit each identification run best."""
 
     def __init__(self, base: BaseFactory, screen: Callable[..., HysteresisModel], *,
-                 unseen: Sequence[str] = ()) -> None:
+                 unseen: Mapping[str, str] | None = None) -> None:
         self.base = base
         self.screen = screen
-        #: effects whose first form the screen cannot see and the real base searches itself
-        #: (:func:`fit_joint`)
-        self.unseen = tuple(unseen)
+        #: effect -> the form of it the screen cannot see, which the real base searches
+        #: itself (:func:`fit_joint`)
+        self.unseen = dict(unseen or {})
         self._screens: dict[RunData, BaseFactory] = {}
 
     def __call__(self) -> HysteresisModel:
@@ -1575,16 +1575,15 @@ def fit_joint(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect, 
     if screen is not None:
         found = fit_joint(screen, fixed, effect, ident, iterations=iterations)
         on_base = _form_on_base(base_factory, screen, found, effect, ident, iterations)
-        if effect.name not in getattr(base_factory, "unseen", ()) or not any(
-                effect.form(g) == effect.first_form for g in effect.grid(ident)):
+        unseen = getattr(base_factory, "unseen", {}).get(effect.name)
+        if unseen is None or not any(effect.form(g) == unseen for g in effect.grid(ident)):
             return on_base
         # a form the screen cannot see (a backlash in front of a play sum is a wider play, so
         # every width fits it alike) is searched on the real base itself: on a textbook
         # Bouc-Wen loop behind a 1 mm backlash the screen's width left 11x the noise, the
         # Bouc-Wen's own search 1.0x (16 fits, 1.5 s)
-        own = fit_with_effect(_searching(base_factory), fixed,
-                              _only_form(effect, effect.first_form), ident,
-                              iterations=iterations)
+        own = fit_with_effect(_searching(base_factory), fixed, _only_form(effect, unseen),
+                              ident, iterations=iterations)
         return own if _sse(own, ident) < _sse(on_base, ident) else on_base
     on_top = retune(base_factory, fit_with_effect(base_factory, fixed, effect, ident,
                                                   iterations=iterations), ident,

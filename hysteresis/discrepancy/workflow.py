@@ -1037,11 +1037,13 @@ BASE_DEFAULTS: dict[str, dict[str, Any]] = {
 #: start. A plant that starts loaded is then clean, not ``unexplained``.
 STARTS_AT_REST = ("bouc_wen", "coleman_hodgdon")
 
-#: Effects a base searches on itself, not on its play-sum screen: a backlash in front of a
-#: play sum is a wider play, so the screen fits every width alike, while a smooth loop (Bouc-Wen,
-#: Coleman-Hodgdon) behind a backlash is not itself (a Preisach plane's relays shift with it).
-SCREEN_UNSEEN: dict[str, tuple[str, ...]] = {"bouc_wen": ("dead_zone",),
-                                             "coleman_hodgdon": ("dead_zone",)}
+#: Effect forms a base searches on itself as well as on its play-sum screen: a backlash in
+#: front of a play sum is a wider play, so the screen fits every width alike, while a smooth
+#: loop (Bouc-Wen, Coleman-Hodgdon) behind a backlash is not itself (a Preisach plane's relays
+#: shift with it); a backlash whose width follows the speed (``slip``) is a speed-scaled play.
+_BACKLASHES = {"dead_zone": "backlash", "rate_dependence": "slip"}
+SCREEN_UNSEEN: dict[str, dict[str, str]] = {"bouc_wen": _BACKLASHES,
+                                            "coleman_hodgdon": _BACKLASHES}
 
 #: Bases identified in closed form (a least-squares solve): fast enough to search an effect's
 #: parameter on themselves. Any other base searches on ``play_sum`` (see ``screen``).
@@ -1072,5 +1074,5 @@ def base_factory_for(name: str, *, screen: bool = True,
     if name in STARTS_AT_REST:
         real = lambda: FromRecordStart(family)  # noqa: E731
     if screen and name not in FAST_BASES:
-        return ScreenedFactory(real, PlaySumModel, unseen=SCREEN_UNSEEN.get(name, ()))
+        return ScreenedFactory(real, PlaySumModel, unseen=SCREEN_UNSEEN.get(name))
     return real

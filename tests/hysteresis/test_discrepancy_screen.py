@@ -156,7 +156,7 @@ def test_a_smooth_base_searches_a_backlash_in_front_of_it_itself() -> None:
     ident = injected_runs("bouc_wen_loop", {"dead_zone": 2.0}, start="rest", seed=0)[0]
     dead_zone = CANDIDATES["dead_zone"]
     factory = base_factory_for("bouc_wen")
-    assert isinstance(factory, ScreenedFactory) and "dead_zone" in factory.unseen
+    assert isinstance(factory, ScreenedFactory) and factory.unseen["dead_zone"] == "backlash"
     own = fit_joint(factory, [], dead_zone, ident)
     assert own.terms[-1].theta == pytest.approx(1.0, abs=0.05)  # total width, mm
     assert np.sqrt(_sse(own, ident) / ident.y.size) < 0.0125  # noise sd 0.01 mm
