@@ -1576,7 +1576,8 @@ def fit_joint(base_factory: BaseFactory, fixed: Sequence[Term], effect: Effect, 
         found = fit_joint(screen, fixed, effect, ident, iterations=iterations)
         on_base = _form_on_base(base_factory, screen, found, effect, ident, iterations)
         unseen = getattr(base_factory, "unseen", {}).get(effect.name)
-        if unseen is None or not any(effect.form(g) == unseen for g in effect.grid(ident)):
+        if fixed or unseen is None or not any(effect.form(g) == unseen
+                                              for g in effect.grid(ident)):
             return on_base
         # a form the screen cannot see (a backlash in front of a play sum is a wider play, so
         # every width fits it alike) is searched on the real base itself: on a textbook
