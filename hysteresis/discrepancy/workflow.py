@@ -320,12 +320,16 @@ def _best_pair(scores: list[dict[str, Any]], base_factory: BaseFactory, groups: 
     return best
 
 
+def _clears_bar(s: dict[str, Any], st: WorkflowSettings) -> bool:
+    """The output's bar: gain, delta BIC and the held-out runs improved."""
+    return bool(s["relative_gain"] >= st.min_relative_gain and s["delta_bic"] <= st.max_delta_bic
+                and s["runs_improved"] >= st.min_runs_improved)
+
+
 def _accept(s: dict[str, Any], st: WorkflowSettings) -> bool:
-    fit_ok = (s["relative_gain"] >= st.min_relative_gain and s["delta_bic"] <= st.max_delta_bic
-              and s["runs_improved"] >= st.min_runs_improved)
     if not st.physical_evidence:
-        return bool(fit_ok)
-    return bool(fit_ok and s["load_cell_evidence"]["corroborated"] is not False)
+        return _clears_bar(s, st)
+    return _clears_bar(s, st) and s["load_cell_evidence"]["corroborated"] is not False
 
 
 def _compact_locate(loc: dict[str, Any]) -> dict[str, Any]:
@@ -535,10 +539,8 @@ def _settles_output(s: dict[str, Any], st: WorkflowSettings, noise_floor: float)
     would prefer); its evidence says that the load cells did not show it."""
     if not (st.physical_evidence and s["load_cell_evidence"]["corroborated"] is False):
         return False
-    fit_ok = (s["relative_gain"] >= st.min_relative_gain and s["delta_bic"] <= st.max_delta_bic
-              and s["runs_improved"] >= st.min_runs_improved)
     over = s["heldout_rmse_after"] / noise_floor if noise_floor > 0 else np.inf
-    if not (fit_ok and over <= st.noise_factor):
+    if not (_clears_bar(s, st) and over <= st.noise_factor):
         return False
     s["load_cell_evidence"] = {
         **s["load_cell_evidence"],
