@@ -43,8 +43,24 @@ def test_a_contradicted_term_short_of_the_noise_is_not_named() -> None:
     assert "note" not in won[0]["load_cell_evidence"]
 
 
-def test_an_acceptable_term_goes_ahead_of_a_contradicted_one_that_fits_better() -> None:
-    st = WorkflowSettings()
-    scores = [_score("dead_zone", 1.0 * FLOOR, False), _score("drift", 3.0 * FLOOR, None, 0.5)]
-    assert [s["name"] for s in _winners(scores, st, 0, 10.0, _no_pairs,
-                                        noise_floor=FLOOR)] == ["drift"]
+def _ranked(scores: list[dict[str, Any]]) -> list[str]:
+    scores = sorted(scores, key=lambda s: s["delta_bic"])
+    return [s["name"] for s in _winners(scores, WorkflowSettings(), 0, 10.0, _no_pairs,
+                                        noise_floor=FLOOR)]
+
+
+def test_a_contradicted_term_that_settles_the_output_ranks_by_its_delta_bic() -> None:
+    settles = {**_score("dead_zone", 1.0 * FLOOR, False), "delta_bic": -900.0}
+    held_gain = {**_score("asymmetry", 11.0 * FLOOR, None, 0.3), "delta_bic": -400.0}
+    assert _ranked([settles, held_gain]) == ["dead_zone"]
+    # an acceptable term with the better delta BIC still goes first
+    assert _ranked([{**settles, "delta_bic": -300.0}, held_gain]) == ["asymmetry"]
+    # and a term the load cells show goes ahead of both
+    shown = {**_score("drift", 3.0 * FLOOR, True, 0.5), "delta_bic": -100.0}
+    assert _ranked([settles, held_gain, shown]) == ["drift"]
+
+
+def test_the_score_offered_is_not_changed_by_the_check() -> None:
+    s = _score("dead_zone", 1.0 * FLOOR, False)
+    won = _winners([s], WorkflowSettings(), 0, 10.0, _no_pairs, noise_floor=FLOOR)
+    assert "note" in won[0]["load_cell_evidence"] and "note" not in s["load_cell_evidence"]
