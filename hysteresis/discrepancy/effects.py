@@ -24,6 +24,7 @@ from functools import cache, partial
 from typing import Any, ClassVar
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import minimize_scalar
 
 from hysteresis.base import HysteresisError, HysteresisModel
@@ -31,6 +32,8 @@ from hysteresis.discrepancy._ops import FloatArray, play, scaled_play, scaled_pl
 from hysteresis.discrepancy.bases import FrozenShapeModel
 from hysteresis.discrepancy.runs import RunData
 from hysteresis.lag import delay_grid
+
+BoolArray = npt.NDArray[np.bool_]
 
 EFFECT_NAMES = (
     "rate_dependence", "tendon_elongation", "time_delay", "drift", "asymmetry",
@@ -996,14 +999,14 @@ class ComposedModel:
         fitted, _ = self._alternate(run, u, y, base, self._unit_columns())
         return fitted
 
-    def _unit_columns(self) -> FloatArray | None:
+    def _unit_columns(self) -> BoolArray | None:
         """Which feature columns belong to a term of a unit form (None: none do)."""
         mask = [t.effect.form(t.theta) in t.effect.unit_forms
                 for t in self.terms if t.n_linear > 0 for _ in range(t.n_linear)]
         return np.asarray(mask, dtype=bool) if any(mask) else None
 
     def _alternate(self, run: RunData, u: FloatArray, y: FloatArray, base: HysteresisModel,
-                   unit: FloatArray | None) -> tuple[tuple[HysteresisModel, FloatArray], float]:
+                   unit: BoolArray | None) -> tuple[tuple[HysteresisModel, FloatArray], float]:
         """Alternate the coefficients on ``y - base`` and the base on ``y - terms``, the
         alternation accelerated (:class:`_Anderson`); ``unit``: columns held at coefficient
         1 in a first alternation, all free after it. A base that can re-solve its linear
@@ -1014,7 +1017,7 @@ class ComposedModel:
         refit = hasattr(base, "refit_weights")
         warm_fits = WARM_BACKFIT and hasattr(base, "refit_warm")
         st = _BackfitState(base, np.zeros_like(y))
-        held: list[FloatArray | None] = [unit]
+        held: list[BoolArray | None] = [unit]
 
         def coefficients(phi: FloatArray, r: FloatArray) -> FloatArray:
             mask = held[0]
