@@ -82,7 +82,7 @@ class Effect:
     #: does not.
     claim_forms: ClassVar[tuple[str, ...]] = ()
     #: Forms whose term at coefficient 1 is the effect itself (an operator on the base's
-    #: prediction, not a small correction to it): their backfitting also starts there
+    #: prediction, not a small correction to it): their backfitting starts there
     #: (:meth:`ComposedModel._backfit`).
     unit_forms: ClassVar[tuple[str, ...]] = ()
 
@@ -991,13 +991,11 @@ class ComposedModel:
                  base: HysteresisModel) -> tuple[HysteresisModel, FloatArray]:
         """Backfitting of the base and the output terms' coefficients from ``base`` (fitted
         on ``y`` alone), :meth:`_alternate`. A term whose coefficient 1 is the effect itself
-        (:attr:`Effect.unit_forms`) is also fitted from that coefficient, and the better of
-        the two ends is kept: from the base fitted on ``y`` alone, which has bent towards
-        the effect, the alternation stops at a fraction of it (a held loading gain of 0.16
-        behind a Preisach plant: coefficient 0.23, 9x the base's clean floor left, where the
-        term at 1 leaves the floor)."""
-        fitted, _ = self._alternate(run, u, y, base, self._unit_columns())
-        return fitted
+        (:attr:`Effect.unit_forms`) is fitted from that coefficient: from the base fitted on
+        ``y`` alone, which has bent towards the effect, the free alternation stops at a
+        fraction of it (a held loading gain of 0.16 behind a Preisach plant: coefficient 0.23,
+        9x the base's clean floor left, where the term at 1 leaves the floor)."""
+        return self._alternate(run, u, y, base, self._unit_columns())
 
     def _unit_columns(self) -> BoolArray | None:
         """Which feature columns belong to a term of a unit form (None: none do)."""
@@ -1006,14 +1004,14 @@ class ComposedModel:
         return np.asarray(mask, dtype=bool) if any(mask) else None
 
     def _alternate(self, run: RunData, u: FloatArray, y: FloatArray, base: HysteresisModel,
-                   unit: BoolArray | None) -> tuple[tuple[HysteresisModel, FloatArray], float]:
+                   unit: BoolArray | None) -> tuple[HysteresisModel, FloatArray]:
         """Alternate the coefficients on ``y - base`` and the base on ``y - terms``, the
         alternation accelerated (:class:`_Anderson`); ``unit``: columns held at coefficient
         1 in a first alternation, all free after it. A base that can re-solve its linear
         weights with its structure kept (``refit_weights``: Gamma's thresholds and start
         position) does so inside the alternation, and is fitted in full once at its end;
         should that full fit choose another structure, the alternation runs once more from
-        it. Returns (base, coefficients) and the squared error."""
+        it."""
         refit = hasattr(base, "refit_weights")
         warm_fits = WARM_BACKFIT and hasattr(base, "refit_warm")
         st = _BackfitState(base, np.zeros_like(y))
@@ -1061,9 +1059,7 @@ class ComposedModel:
             if same:
                 break
         phi = self._features(run, yb, st.known)
-        coef = _lstsq(phi, y - yb)
-        sse = float(np.sum((y - yb - self._features(run, yb, coef) @ coef) ** 2))
-        return (st.base, coef), sse
+        return st.base, _lstsq(phi, y - yb)
 
     def predict(self, run: RunData) -> FloatArray:
         if not hasattr(self, "base_"):

@@ -545,7 +545,7 @@ def _settles_output(s: dict[str, Any], st: WorkflowSettings, noise_floor: float)
 def _overruled(s: dict[str, Any], noise_floor: float) -> dict[str, Any]:
     """``s`` with its evidence saying the load cells did not show it, and why it is named."""
     ev = s["load_cell_evidence"]
-    over = s["heldout_rmse_after"] / noise_floor
+    over = s["heldout_rmse_after"] / noise_floor if noise_floor > 0 else 0.0
     return {**s, "load_cell_evidence": {
         **ev, "note": f"the load cells do not show its {ev['claim']}; named because it alone "
                       f"leaves {over:.1f}x the noise floor held out"}}
