@@ -1106,8 +1106,9 @@ class _Anderson:
 
     Each round mixes the last :attr:`memory` steps by the least squares of their residuals
     ``step(x) - x`` (Walker and Ni, 2011, type II). ``step`` also returns the squared error
-    of its output: a round that does not lower the best error drops the history (a plain step
-    from there), and :attr:`patience` such rounds in a row end the search (a term that reads
+    of its output: a round that does not lower the best error drops the history and steps
+    plainly from the best step's output (a safeguarded Anderson), and :attr:`patience` such
+    rounds in a row end the search (a term that reads
     the base's prediction makes the alternation's fixed point differ from the least squares,
     and past the best point it may climb). Ends too when the error changes by at most ``tol``
     of itself, or after ``rounds`` steps. Returns the best step's output, its step run last
@@ -1134,15 +1135,19 @@ class _Anderson:
                 best_sse, best_x, best_out, worse = sse, x, out, 0
                 if converged:
                     break
+                outs.append(out)
+                resids.append(out - x)
+                outs, resids = outs[-self.memory - 1:], resids[-self.memory - 1:]
+                x = self._mixed(outs, resids)
             else:
                 worse += 1
                 if worse >= self.patience:
                     break
-                outs, resids = [], []
-            outs.append(out)
-            resids.append(out - x)
-            outs, resids = outs[-self.memory - 1:], resids[-self.memory - 1:]
-            x = self._mixed(outs, resids)
+                # the mixed point overshot: a plain step from the best one, not from the
+                # point that overshot (from there the plain steps climbed back too slowly
+                # to beat the best within the patience, and a held gain stopped at 2x)
+                outs, resids = [best_out], [best_out - best_x]
+                x = best_out
         if last_x is not best_x:
             best_out, _ = self.step(best_x)
         return best_out

@@ -88,6 +88,21 @@ def test_anderson_returns_the_best_step_when_the_error_climbs() -> None:
     assert seen[-1] == seen[1] and float(out[0]) == seen[1] + 1.0
 
 
+def test_anderson_steps_on_from_the_best_step_after_an_overshoot() -> None:
+    # x -> x / 2 + 1: the second mixed point is the fixed point 2 itself; the scripted errors
+    # call it worse, and the next step starts from the best step's output (1.5), not from it
+    errors = iter([5.0, 3.0, 4.0, 2.0, 1.0])
+    seen: list[float] = []
+
+    def step(x: np.ndarray) -> tuple[np.ndarray, float]:
+        seen.append(float(x[0]))
+        return 0.5 * x + 1.0, next(errors, 0.5)
+
+    _Anderson(step, 4, 0.0).solve(np.zeros(1))
+    assert seen[:3] == pytest.approx([0.0, 1.0, 2.0])
+    assert seen[3] == pytest.approx(1.5)
+
+
 def test_a_known_tanh_stop_is_fitted_exactly_by_the_accelerated_backfitting() -> None:
     # a term reading the base's prediction couples the two fits: the plain alternation
     # contracts by about 0.8 a round, and 8 plain rounds left this stop 11 % short

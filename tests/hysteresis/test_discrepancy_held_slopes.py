@@ -3,7 +3,8 @@ held between its branches) behind a smooth plant, from the clean-room generator
 ``tests/cleanroom/slope_smooth.py`` (written without our code): the held loading gain's term is
 backfitted from its coefficient 1 (``Effect.unit_forms``) and recovers the slopes; from the base
 fitted on the output alone, which has bent towards the effect, the free alternation stops at a
-fraction of it. The whole set through the stage's command is in
+fraction of it; behind a Duhem loop the accelerated steps overshoot, and the alternation
+steps on from its best step. The whole set through the stage's command is in
 docs/notes/discrepancy-measurements.md (fifteenth round)."""
 
 from __future__ import annotations
@@ -47,3 +48,22 @@ def test_a_held_gain_behind_a_preisach_plane_is_fitted_at_its_slopes(
     monkeypatch.setattr(Asymmetry, "unit_forms", ())
     free = ComposedModel(base, [term]).fit(ident)
     assert _rmse(free, held_out) > 3.0 * recovered
+
+
+@pytest.mark.slow
+def test_a_held_gain_behind_a_duhem_loop_reaches_the_noise_on_a_bouc_wen_base(
+        tmp_path: Path) -> None:
+    # the backfitting's accelerated steps overshoot here; stepping on from the overshoot
+    # (not from the best step) the alternation stopped at 4.6x the noise, slopes right
+    generator = load("slope_smooth")
+    g = 0.16
+    made = generator._write_source({"outdir": str(tmp_path), "seed": 0, "plant": "duhem",
+                                    "tag": "g0.16-top", "start": "rest", "g": g,
+                                    "pivot": "top"})
+    runs = stage_runs(tmp_path / made["name"], tmp_path / "work")
+    ident, held_out = runs[0], runs[1:]
+    effect = candidate("asymmetry")
+    term = Term(effect, ("held_gain", 1.0, g), tuple(effect.context(ident).items()))
+    fitted = ComposedModel(base_factory_for("bouc_wen", screen=False), [term]).fit(ident)
+    assert fitted.coef_[0] == pytest.approx(1.0, abs=0.05)
+    assert _rmse(fitted, held_out) < 2.0 * NOISE_MM
