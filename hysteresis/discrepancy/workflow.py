@@ -1043,8 +1043,9 @@ BASE_DEFAULTS: dict[str, dict[str, Any]] = {
 
 #: Families whose own fit starts every record at rest: as a base, each run starts where the
 #: identification record shows the plant starts (:class:`.bases.FromRecordStart`), as the
-#: Gamma base takes its fitted start position (``start_state="fit"``) and Preisach its fitted
-#: start. A plant that starts loaded is then clean, not ``unexplained``.
+#: Gamma base takes its fitted start position (``start_state="fit"``) and Preisach starts
+#: demagnetised about each run's first input. A plant that starts loaded is then clean, not
+#: ``unexplained``.
 STARTS_AT_REST = ("bouc_wen", "coleman_hodgdon")
 
 #: Effect forms a base searches on itself as well as on its play-sum screen: a backlash in
