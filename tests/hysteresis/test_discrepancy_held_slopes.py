@@ -25,18 +25,21 @@ def _rmse(model: ComposedModel, runs: list) -> float:
     return float(np.sqrt(np.mean(np.concatenate([model.predict(r) - r.y for r in runs]) ** 2)))
 
 
+def _held_slopes(tmp_path: Path, plant: str, g: float) -> tuple[list, Term]:
+    """The generator's source of ``plant`` with held slopes ``g`` (pivot above the pulled
+    end) as the stage reads it, and the held-gain term at the true slopes."""
+    made = load("slope_smooth")._write_source({
+        "outdir": str(tmp_path), "seed": 0, "plant": plant, "tag": f"g{g}-top",
+        "start": "rest", "g": g, "pivot": "top"})
+    runs = stage_runs(tmp_path / made["name"], tmp_path / "work")
+    effect = candidate("asymmetry")
+    return runs, Term(effect, ("held_gain", 1.0, g), tuple(effect.context(runs[0]).items()))
+
+
 @pytest.mark.slow
 def test_a_held_gain_behind_a_preisach_plane_is_fitted_at_its_slopes(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    generator = load("slope_smooth")
-    g = 0.16
-    made = generator._write_source({"outdir": str(tmp_path), "seed": 0, "plant": "preisach",
-                                    "tag": "g0.16-top", "start": "rest", "g": g,
-                                    "pivot": "top"})
-    runs = stage_runs(tmp_path / made["name"], tmp_path / "work")
-    ident, held_out = runs[0], runs[1:]
-    effect = candidate("asymmetry")
-    term = Term(effect, ("held_gain", 1.0, g), tuple(effect.context(ident).items()))
+    (ident, *held_out), term = _held_slopes(tmp_path, "preisach", 0.16)
     base = base_factory_for("preisach", screen=False)
 
     fitted = ComposedModel(base, [term]).fit(ident)
@@ -55,15 +58,7 @@ def test_a_held_gain_behind_a_duhem_loop_reaches_the_noise_on_a_bouc_wen_base(
         tmp_path: Path) -> None:
     # the backfitting's accelerated steps overshoot here; stepping on from the overshoot
     # (not from the best step) the alternation stopped at 4.6x the noise, slopes right
-    generator = load("slope_smooth")
-    g = 0.16
-    made = generator._write_source({"outdir": str(tmp_path), "seed": 0, "plant": "duhem",
-                                    "tag": "g0.16-top", "start": "rest", "g": g,
-                                    "pivot": "top"})
-    runs = stage_runs(tmp_path / made["name"], tmp_path / "work")
-    ident, held_out = runs[0], runs[1:]
-    effect = candidate("asymmetry")
-    term = Term(effect, ("held_gain", 1.0, g), tuple(effect.context(ident).items()))
+    (ident, *held_out), term = _held_slopes(tmp_path, "duhem", 0.16)
     fitted = ComposedModel(base_factory_for("bouc_wen", screen=False), [term]).fit(ident)
     assert fitted.coef_[0] == pytest.approx(1.0, abs=0.05)
     assert _rmse(fitted, held_out) < 2.0 * NOISE_MM
