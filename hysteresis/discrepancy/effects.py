@@ -1108,9 +1108,9 @@ class _Anderson:
     ``step(x) - x`` (Walker and Ni, 2011, type II). ``step`` also returns the squared error
     of its output: a round that does not lower the best error drops the history and steps
     plainly from the best step's output (a safeguarded Anderson), and :attr:`patience` such
-    rounds in a row end the search (a term that reads
-    the base's prediction makes the alternation's fixed point differ from the least squares,
-    and past the best point it may climb). Ends too when the error changes by at most ``tol``
+    rounds in a row end the search (a term that reads the base's prediction makes the
+    alternation's fixed point differ from the least squares, and past the best point it may
+    climb). Ends too when the error changes by at most ``tol``
     of itself, or after ``rounds`` steps. Returns the best step's output, its step run last
     (the step's side effects, a base refitted in place, belong to it)."""
 
@@ -1145,7 +1145,7 @@ class _Anderson:
                     break
                 # the mixed point overshot: a plain step from the best one, not from the
                 # point that overshot (from there the plain steps climbed back too slowly
-                # to beat the best within the patience, and a held gain stopped at 2x)
+                # to beat the best within the patience: a held gain stopped at 3x the floor)
                 outs, resids = [best_out], [best_out - best_x]
                 x = best_out
         if last_x is not best_x:
