@@ -2,8 +2,8 @@
 
 Provenance
 ----------
-Read, and nothing else of the project: ``/work/shared/rig-log-format.md`` (the raw-run format
-``tsm-rig-log/1``), ``/work/shared/seeds/README.md``, the papers ``000_*.txt`` (Coleman-Hodgdon
+Read, and nothing else of the project: ``../shared/rig-log-format.md`` (the raw-run format
+``tsm-rig-log/1``), ``../shared/seeds/README.md``, the papers ``000_*.txt`` (Coleman-Hodgdon
 model, eq. 10-11), ``001_*.txt`` (the rig, the three excitations, Preisach relays and densities,
 eq. 4.1-4.5) and ``002_*.txt`` (Bouc-Wen model, eq. 2-3), plus the clean-room writer
 ``tests/cleanroom/riglog.py`` (imported for the excitations and the run-folder writer).
