@@ -47,6 +47,7 @@ from hysteresis.discrepancy.effects import (
     only_forms,
     screened_sse,
 )
+from hysteresis.discrepancy.errors import DiscrepancyError
 from hysteresis.discrepancy.evidence import (
     corroboration,
     output_tension_follows,
@@ -381,6 +382,21 @@ def reach_check(base_factory: BaseFactory, ident: RunData, names: Sequence[str],
 SESSION_GAIN = 0.1
 
 
+def _fit_plain(base_factory: BaseFactory, groups: list[Group], base_name: str
+               ) -> dict[str, ComposedModel]:
+    """The base alone on each configuration; a base that cannot take these runs at all (a
+    Preisach plane of positive density under an output flat around zero) is one line naming
+    the way out, not a traceback from inside its fit."""
+    try:
+        return fit_models(base_factory, groups, {g.key: [] for g in groups})
+    except DiscrepancyError:
+        raise
+    except HysteresisError as err:
+        raise DiscrepancyError(
+            f"base {base_name} cannot be fitted to these runs ({err}); base_family=auto "
+            "ranks the families and passes over one that cannot") from None
+
+
 def run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_name: str,
                  settings: WorkflowSettings | None = None,
                  model_error: dict[str, FloatArray] | None = None,
@@ -425,7 +441,7 @@ def _run_workflow(runs: Sequence[RunData], base_factory: BaseFactory, *, base_na
     joins: list[dict[str, Any]] = []  # each round's comparison, until the runs are joined
     _check_candidates(st.candidates)
     terms: dict[str, list[Term]] = {g.key: [] for g in groups}
-    models = fit_models(base_factory, groups, terms)
+    models = _fit_plain(base_factory, groups, base_name)
     current = evaluate(models, groups)
     all_runs = _runs_of(groups)
     reach = reach_check(base_factory, groups[0].ident, st.candidates)

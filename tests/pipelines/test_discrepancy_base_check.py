@@ -258,3 +258,15 @@ def test_the_workflow_stops_after_its_first_round_when_no_term_comes_near_the_no
     assert cut["stopped"]["best_over_noise"] == pytest.approx(2.0 * bar)
     assert cut["verdict"] == "unexplained"
     assert cut["rankings"][0] == full["rankings"][0]
+
+
+def test_a_given_base_that_cannot_take_the_runs_is_one_clear_error() -> None:
+    """A dead band around zero behind the injector's Bouc-Wen loop: no Preisach plane of
+    positive density fits it (``auto`` passes over that family). Given by name, the stage says
+    so in one line and names the way out, where it raised from inside the base's fit."""
+    from hysteresis.discrepancy.errors import DiscrepancyError
+
+    runs = injected_runs("bouc_wen_loop", {"dead_zone:dead_band": 1.0})
+    with pytest.raises(DiscrepancyError,
+                       match=r"base preisach cannot be fitted.*positive density.*base_family=auto"):
+        analyse(runs, base_family="preisach", auto_families={})
