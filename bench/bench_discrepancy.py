@@ -392,6 +392,8 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
 
 #: The bases a verdict must not depend on: every auto family, given explicitly.
 BASES = ("gamma", "gamma_free", "preisach", "bouc_wen", "coleman_hodgdon")
+#: A given base's answer where the stage stops with "base ... cannot be fitted to these runs".
+CANNOT_FIT = "cannot_fit"
 
 
 def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]] | None = None,
@@ -418,6 +420,7 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
     from hysteresis.discrepancy.workflow import WorkflowSettings
     from pipelines.common import CONF_DIR, to_container
     from pipelines.discrepancy import (
+        DiscrepancyError,
         analyse,
         asks_best_family,
         best_family_answers,
@@ -448,10 +451,16 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
                                      base_retry_factor=float(cfg["base_retry_factor"]))
                 else:
                     params = {k: v for k, v in families[base].items() if k != "family"}
-                    rep, _ = analyse(runs, settings=settings,
-                                     base_family=str(families[base].get("family", base)),
-                                     base_params=params, auto_families=families,
-                                     base_check=False)
+                    try:
+                        rep, _ = analyse(runs, settings=settings,
+                                         base_family=str(families[base].get("family", base)),
+                                         base_params=params, auto_families=families,
+                                         base_check=False)
+                    except DiscrepancyError as err:
+                        # the stage's answer with this base given is this error: no name
+                        row[base] = {"first": CANNOT_FIT, "named": [], "error": str(err),
+                                     "seconds": round(time.perf_counter() - t0, 1)}
+                        continue
                 named = [e["name"] for e in rep["effects"]]
                 row[base] = {"first": named[0] if named else None, "named": named,
                              "kept": next((t["base"] for t in rep["bases_tried"] or []
@@ -466,6 +475,9 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
             kept = row["auto"]["kept"]
             for base in BASES:
                 own = row[base]
+                if own["first"] == CANNOT_FIT:
+                    own["misfit"], own["stage"] = False, CANNOT_FIT
+                    continue
                 asked = asks_best_family(
                     {"verdict": own["verdict"],
                      "residual": {"rmse_over_noise": own["rmse_over_noise"]}},
@@ -489,7 +501,9 @@ def base_independence(cases: dict[str, tuple[dict[str, float], str, str | None]]
         "stage_all_bases_agree_with_auto": sum(r["all_agree_stage"] for r in rows),
         "stage_agree_with_auto_by_base": {
             b: sum(r[b]["stage"] == r["auto"]["first"] for r in rows) for b in BASES},
-        "misfit_flagged_by_base": {b: sum(r[b]["misfit"] for r in rows) for b in BASES}}
+        "misfit_flagged_by_base": {b: sum(r[b]["misfit"] for r in rows) for b in BASES},
+        "cannot_fit_by_base": {b: sum(r[b]["first"] == CANNOT_FIT for r in rows)
+                               for b in BASES}}
     return out
 
 
