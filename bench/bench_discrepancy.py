@@ -14,6 +14,7 @@ locate -> name -> add loop, and the ratio against the reference joint refit by b
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import time
@@ -224,7 +225,8 @@ def score_answer(report: dict[str, Any], hidden: tuple[str, str] | None,
     """One source's answer against its truth: ``hit`` (identifiable: the hidden effect named
     first with its form and the held-out RMSE at least halved against the best plain family;
     not identifiable: the class answer holds the effect, or the base absorbs it and the
-    verdict is clean; clean: nothing named), ``name_hit`` (the name alone). The form counts
+    verdict is clean; clean: nothing named), ``name_hit`` (the name alone), ``form_hit``
+    (identifiable: the name and form first, whatever the held-out cut). The form counts
     when it is the one named or among the forms the report calls not separable from it on
     the held-out runs; ``single_form_hit`` asks for it named alone."""
     named = [(e["name"], e.get("form")) for e in report["effects"]]
@@ -239,6 +241,7 @@ def score_answer(report: dict[str, Any], hidden: tuple[str, str] | None,
         ties = report["effects"][0].get("forms_not_separable") or [] if named else []
         in_forms = bool(name_hit and (first == hidden or hidden[1] in ties))
         return {"hit": bool(in_forms and cut >= 0.5), "name_hit": name_hit,
+                "form_hit": in_forms,
                 "single_form_hit": bool(first == hidden and len(ties) < 2 and cut >= 0.5)}
     in_class = hidden[0] in (ident.get("class") or [])
     absorbed = not named and report["verdict"] == "no_missing_effect"
@@ -344,6 +347,31 @@ def _clean_floors(rows: dict[str, Any]) -> dict[tuple[str, str], float]:
     return out
 
 
+def _clean_floors_least(rows: dict[str, Any]) -> dict[tuple[str, str], float]:
+    """As :func:`_clean_floors`, the least of them: the strictest floor to read an effect's
+    share of the error against."""
+    out: dict[tuple[str, str], float] = {}
+    for v in rows.values():
+        if isinstance(v, dict) and "plant" in v and not v.get("hidden"):
+            key = (v["plant"], v["start"])
+            out[key] = min(out.get(key, math.inf), float(v["rmse_over_noise"]))
+    return out
+
+
+def excess_halved(row: dict[str, Any], floor: float) -> bool:
+    """The effect's share of the held-out error at least halved: the error over the plant's
+    clean floor, ``sqrt(e^2 - floor^2)`` (the floor is what the base leaves on the same
+    plant with the same noise and no effect, so a term that removed the effect exactly would
+    leave it), after the terms against the best plain family. Where the plain error is under
+    twice the floor, halving the whole error would beat the clean record; this asks for
+    half of what the effect adds."""
+    plain = _plain_over_noise(row)
+    left = float(row["rmse_over_noise"])
+    added = math.sqrt(max(plain ** 2 - floor ** 2, 0.0))
+    kept = math.sqrt(max(left ** 2 - floor ** 2, 0.0))
+    return bool(added > 0 and kept <= 0.5 * added)
+
+
 def summarise(rows: dict[str, Any]) -> dict[str, Any]:
     """The matrix's figures: identifiable sources named first (name and form) and halved,
     non-identifiable ones answered with their class (or absorbed and clean), effects named
@@ -357,6 +385,9 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
     floor = _clean_floors(rows)
     over_floor = [v for v in ident if (f := floor.get((v.get("plant"), v.get("start"))))
                   and _plain_over_noise(v) >= 2.0 * f]
+    least = _clean_floors_least(rows)
+    with_floor = [(v, least[k]) for v in ident
+                  if (k := (v.get("plant"), v.get("start"))) in least]
     return {
         "sources": len(vals), "max_seconds": max((v["seconds"] for v in vals), default=0.0),
         "over_60_s": sum(v["seconds"] > 60 for v in vals),
@@ -381,6 +412,12 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
         "identifiable_halvable_over_clean_floor": len(over_floor),
         "identifiable_halvable_over_clean_floor_named_first_and_halved": sum(
             v["hit"] for v in over_floor),
+        # every identifiable source with a clean floor: named first with its form and the
+        # effect's share of the held-out error (over that floor, the least of the plant's
+        # clean sources of the same start) at least halved (:func:`excess_halved`)
+        "identifiable_with_clean_floor": len(with_floor),
+        "identifiable_named_first_and_excess_halved": sum(
+            bool(v.get("form_hit", v["hit"])) and excess_halved(v, f) for v, f in with_floor),
         "non_identifiable": len(non),
         "non_identifiable_class_or_absorbed": sum(v["hit"] for v in non),
         "clean": len(clean), "effects_named_on_clean": sum(len(v["named"]) > 0 for v in clean),
