@@ -16,7 +16,7 @@ ARGS ?=
 RUNS ?= data/raw/virtual
 REPORT ?= data/reports/discrepancy.json
 
-.PHONY: help venv data generate ingest fit validate report pipeline test test-fast bench crash-test ui \
+.PHONY: help venv data generate ingest fit validate report pipeline test test-study test-fast bench crash-test ui \
         compensate discrepancy discrepancy-study foreign-example lint typecheck clean clean-data \
         venv-team chromium postgresql cluster-check ui-check team-test bench-cluster \
         docs-figures lineage-check report-check cli-check
@@ -24,6 +24,7 @@ REPORT ?= data/reports/discrepancy.json
 help:
 	@echo "make pipeline    generate -> ingest -> fit -> validate -> report (virtual rig, local MLflow)"
 	@echo "make test        run the test suite"
+	@echo "make test-study  the study-size checks: clean-room sets through the discrepancy stage (CI runs it)"
 	@echo "make cli-check   the clean-room command-line contract of every stage (CI runs it)"
 	@echo "make data        write the 120-run standard virtual campaign under data/raw/virtual/"
 	@echo "make ingest      raw runs -> data/processed/ (validated parquet)"
@@ -76,14 +77,20 @@ CLI_CONTRACT := tests/cleanroom/test_cli_contract.py
 
 test: $(STAMP)
 	$(PY) -m pytest -n 2 --dist loadfile --no-loadscope-reorder --ignore=tests/team \
-	  --ignore=$(CLI_CONTRACT)
+	  --ignore=$(CLI_CONTRACT) -m 'not study'
+
+# the study-size checks (clean-room sets through the stage, the study's end-to-end case,
+# two ablations; about 100 s of CPU): CI runs them after `make test`, which stays under
+# 5 minutes on 2 cores
+test-study: $(STAMP)
+	$(PY) -m pytest -n 2 --dist loadfile --ignore=tests/team --ignore=$(CLI_CONTRACT) -m study
 
 cli-check: $(STAMP)
 	$(PY) -m pytest -q -n 0 -p no:cacheprovider $(CLI_CONTRACT)
 
 # the inner loop: everything but the tests marked slow (simulated campaigns, subprocess kills)
 test-fast: $(STAMP)
-	$(PY) -m pytest -n 2 -m 'not slow' --ignore=tests/team --ignore=$(CLI_CONTRACT)
+	$(PY) -m pytest -n 2 -m 'not slow and not study' --ignore=tests/team --ignore=$(CLI_CONTRACT)
 
 bench: $(STAMP)
 	$(PY) -m bench.run --out bench/results.json

@@ -203,6 +203,7 @@ def test_two_hidden_effects_are_both_named(effects):
     assert h[-1] < 0.6 * h[0]
 
 
+@pytest.mark.study
 def test_a_frozen_earlier_term_hides_the_second_effect():
     # The ablation for the joint refit, ranked on the output fit alone (which takes the drift
     # first): with the drift's time constant frozen where it was chosen (while the dead zone

@@ -199,6 +199,7 @@ def test_auto_base_tries_the_next_family_when_the_first_leaves_the_effect_half_e
     assert one["base_family"] == "bouc_wen" and len(one["bases_tried"]) == 1
 
 
+@pytest.mark.study
 def test_an_effect_the_best_plain_family_absorbs_is_found_on_the_next(
         families: dict[str, Any]) -> None:
     """A pull/push gain difference on a Bouc-Wen plant: the Preisach plane fits best plain,

@@ -16,6 +16,9 @@ from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
 from pipelines.discrepancy_data import ingest_source, runs_from_dataset
 
+# a clean-room set through the stage: `make test-study` and CI, not `make test`
+pytestmark = pytest.mark.study
+
 CLEANROOM = Path(__file__).resolve().parents[1] / "cleanroom"
 #: The base (as ``auto_families.gamma_free``): free play weights with an offset, start fitted.
 BASE = {"constraint": "free", "fit_offset": True}

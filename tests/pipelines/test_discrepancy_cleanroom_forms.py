@@ -14,6 +14,9 @@ from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
 from tests.cleanroom import load, stage_runs
 
+# a clean-room set through the stage: `make test-study` and CI, not `make test`
+pytestmark = pytest.mark.study
+
 
 @pytest.mark.slow
 def test_a_cubic_softening_the_record_cannot_tell_from_a_tanh_stop_is_named_with_it(

@@ -14,6 +14,9 @@ from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
 from tests.cleanroom import load, stage_runs
 
+# a clean-room set through the stage: `make test-study` and CI, not `make test`
+pytestmark = pytest.mark.study
+
 #: The base (as ``auto_families.gamma_free``): free play weights with an offset, start fitted.
 BASE = {"constraint": "free", "fit_offset": True}
 

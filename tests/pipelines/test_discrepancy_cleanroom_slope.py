@@ -15,6 +15,9 @@ from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
 from tests.cleanroom import load, stage_runs
 
+# a clean-room set through the stage: `make test-study` and CI, not `make test`
+pytestmark = pytest.mark.study
+
 
 @pytest.mark.slow
 def test_a_backlash_with_different_slopes_is_named_a_loading_gain_with_its_slopes(

@@ -16,6 +16,9 @@ from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
 from tests.cleanroom import load, stage_runs
 
+# a clean-room set through the stage: `make test-study` and CI, not `make test`
+pytestmark = pytest.mark.study
+
 #: The generator's seed of this source in its own matrix (``write_all``).
 SEED = 1002
 

@@ -133,6 +133,7 @@ def test_shortfalls_name_each_expectation_the_study_missed() -> None:
                             combination_reduction=0.4) == []
 
 
+@pytest.mark.study
 def test_one_hidden_effect_end_to_end_logged_and_checked(tmp_path: Path) -> None:
     import mlflow
 
