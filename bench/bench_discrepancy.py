@@ -306,6 +306,7 @@ def cleanroom_matrix(root: str | None = None, *, plants: tuple[str, ...] | None 
             identifiable = bool(idf["identifiable"] and not idf["identifiable_with"])
             row = {"plant": truth["plant"], "hidden": list(hidden) if hidden else None,
                    "strength": truth["strength"], "loaded": truth["loaded_start"],
+                   "start": "loaded" if truth["loaded_start"] else "rest",
                    "ragged": truth["ragged"], "identifiable": identifiable,
                    "true_class": idf["class"], "seconds": round(seconds, 1),
                    "cpu_seconds": round(cpu, 1),
@@ -342,7 +343,7 @@ def _clean_floors(rows: dict[str, Any]) -> dict[tuple[str, str], float]:
     out: dict[tuple[str, str], float] = {}
     for v in rows.values():
         if isinstance(v, dict) and "plant" in v and not v.get("hidden"):
-            key = (v["plant"], v["start"])
+            key = (v["plant"], v.get("start", ""))
             out[key] = max(out.get(key, 0.0), float(v["rmse_over_noise"]))
     return out
 
@@ -353,7 +354,7 @@ def _clean_floors_least(rows: dict[str, Any]) -> dict[tuple[str, str], float]:
     out: dict[tuple[str, str], float] = {}
     for v in rows.values():
         if isinstance(v, dict) and "plant" in v and not v.get("hidden"):
-            key = (v["plant"], v["start"])
+            key = (v["plant"], v.get("start", ""))
             out[key] = min(out.get(key, math.inf), float(v["rmse_over_noise"]))
     return out
 
@@ -383,11 +384,11 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
     by_base = [v for v in vals if v.get("first_by_base")]
     halvable = [v for v in ident if _plain_over_noise(v) >= 2.0]
     floor = _clean_floors(rows)
-    over_floor = [v for v in ident if (f := floor.get((v.get("plant"), v.get("start"))))
+    over_floor = [v for v in ident if (f := floor.get((v.get("plant"), v.get("start", ""))))
                   and _plain_over_noise(v) >= 2.0 * f]
     least = _clean_floors_least(rows)
     with_floor = [(v, least[k]) for v in ident
-                  if (k := (v.get("plant"), v.get("start"))) in least]
+                  if (k := (v.get("plant"), v.get("start", ""))) in least]
     return {
         "sources": len(vals), "max_seconds": max((v["seconds"] for v in vals), default=0.0),
         "over_60_s": sum(v["seconds"] > 60 for v in vals),

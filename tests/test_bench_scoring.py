@@ -75,3 +75,14 @@ def test_the_effects_share_is_read_over_the_plants_clean_floor() -> None:
     assert out["identifiable_named_first_and_halved"] == 0
     assert out["identifiable_with_clean_floor"] == 3
     assert out["identifiable_named_first_and_excess_halved"] == 1
+
+
+def test_rows_without_a_start_are_summarised_on_one_floor_per_plant() -> None:
+    def row(over: float, hidden: list[str] | None) -> dict[str, Any]:
+        return {"plant": "p", "hidden": hidden, "identifiable": True, "named": [],
+                "hit": hidden is None, "name_hit": hidden is None, "seconds": 1.0,
+                "cpu_seconds": 1.0, "rmse_over_noise": over,
+                "heldout_reduction_vs_best_plain": 0.0}
+    out = summarise({"a": row(1.0, None), "b": row(3.0, ["drift", "linear"])})
+    assert out["identifiable_with_clean_floor"] == 1
+    assert out["identifiable_halvable_over_clean_floor"] == 1
