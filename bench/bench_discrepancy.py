@@ -337,26 +337,16 @@ def _plain_over_noise(row: dict[str, Any]) -> float:
     return float(row["rmse_over_noise"]) / kept if kept > 0 else float("inf")
 
 
-def _clean_floors(rows: dict[str, Any]) -> dict[tuple[str, str], float]:
-    """(plant, start) -> the worst held-out RMSE over the noise floor the workflow leaves on
-    that plant's clean sources of that start (rows that carry ``plant``)."""
-    out: dict[tuple[str, str], float] = {}
+def _clean_floors(rows: dict[str, Any], pick: Any = max) -> dict[tuple[str, str], float]:
+    """(plant, start) -> the held-out RMSE over the noise floor the workflow leaves on that
+    plant's clean sources of that start (rows that carry ``plant``), the worst of them, or
+    with ``pick=min`` the least (the strictest floor to read an effect's share against)."""
+    found: dict[tuple[str, str], list[float]] = {}
     for v in rows.values():
         if isinstance(v, dict) and "plant" in v and not v.get("hidden"):
-            key = (v["plant"], v.get("start", ""))
-            out[key] = max(out.get(key, 0.0), float(v["rmse_over_noise"]))
-    return out
-
-
-def _clean_floors_least(rows: dict[str, Any]) -> dict[tuple[str, str], float]:
-    """As :func:`_clean_floors`, the least of them: the strictest floor to read an effect's
-    share of the error against."""
-    out: dict[tuple[str, str], float] = {}
-    for v in rows.values():
-        if isinstance(v, dict) and "plant" in v and not v.get("hidden"):
-            key = (v["plant"], v.get("start", ""))
-            out[key] = min(out.get(key, math.inf), float(v["rmse_over_noise"]))
-    return out
+            found.setdefault((v["plant"], v.get("start", "")), []).append(
+                float(v["rmse_over_noise"]))
+    return {key: float(pick(vals)) for key, vals in found.items()}
 
 
 def excess_halved(row: dict[str, Any], floor: float) -> bool:
@@ -386,7 +376,7 @@ def summarise(rows: dict[str, Any]) -> dict[str, Any]:
     floor = _clean_floors(rows)
     over_floor = [v for v in ident if (f := floor.get((v.get("plant"), v.get("start", ""))))
                   and _plain_over_noise(v) >= 2.0 * f]
-    least = _clean_floors_least(rows)
+    least = _clean_floors(rows, min)
     with_floor = [(v, least[k]) for v in ident
                   if (k := (v.get("plant"), v.get("start", ""))) in least]
     return {
