@@ -18,6 +18,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 from unittest import mock
 
@@ -337,7 +338,8 @@ def _plain_over_noise(row: dict[str, Any]) -> float:
     return float(row["rmse_over_noise"]) / kept if kept > 0 else float("inf")
 
 
-def _clean_floors(rows: dict[str, Any], pick: Any = max) -> dict[tuple[str, str], float]:
+def _clean_floors(rows: dict[str, Any], pick: Callable[[list[float]], float] = max
+                  ) -> dict[tuple[str, str], float]:
     """(plant, start) -> the held-out RMSE over the noise floor the workflow leaves on that
     plant's clean sources of that start (rows that carry ``plant``), the worst of them, or
     with ``pick=min`` the least (the strictest floor to read an effect's share against)."""
