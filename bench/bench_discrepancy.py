@@ -205,7 +205,7 @@ CLEANROOM_NAMES: dict[tuple[str, str], tuple[str, str]] = {
     ("saturation", "soft_tanh"): ("saturation", "soft"),
     ("saturation", "hard_clip"): ("saturation", "hard_stop"),
     ("saturation", "cubic_softening"): ("saturation", "cubic"),
-    ("rate_dependence", "stribeck"): ("rate_dependence", "speed_friction"),
+    ("rate_dependence", "stribeck"): ("rate_dependence", "stribeck"),
     ("rate_dependence", "viscous"): ("rate_dependence", "viscous"),
     ("rate_dependence", "nonlinear_damping"): ("rate_dependence", "power"),
     ("rate_dependence", "relaxation"): ("rate_dependence", "relaxation"),

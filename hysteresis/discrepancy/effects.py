@@ -184,6 +184,14 @@ class Effect:
         return {"signature": self.signature, "term": self.term, "side": self.side}
 
 
+#: Stribeck speeds v_S of the ``stribeck`` form, as fractions of the identification run's top
+#: speed (the static excess fades over a few v_S).
+STRIBECK_SPEEDS = (0.05, 0.12, 0.3)
+#: Speed (fraction of the top speed) below which the contact counts as sticking: the width of
+#: the ``stribeck`` form's turn of direction (the runs' own still-speed, :attr:`RunData.v_eps`).
+STRIBECK_EPS = 0.02
+
+
 class RateDependence(Effect):
     name = "rate_dependence"
     signature = (
@@ -205,9 +213,17 @@ class RateDependence(Effect):
     first_form = "speed_friction"
     #: a speed law of the sheath's friction (Stribeck-like, viscous, |v|^a damping) raises
     #: the friction the two load cells read; a first-order relaxation of the output (a
-    #: viscoelastic lag in the transmission) need not change the tension ratio at all
+    #: viscoelastic lag in the transmission) need not change the tension ratio at all. The
+    #: Stribeck form's excess is static friction, at the slow ends of the strokes, right
+    #: after the reversals the reading leaves out while the slip front runs through the
+    #: sheath (:func:`.friction.friction_reading`), and it falls with the speed: the
+    #: reading's test (higher when faster) cannot show it.
     claim_forms = ("viscous", "power")
-    #: viscous: c v; power: c sign(v) |v / v_top|^a (nonlinear damping); relaxation: c times
+    #: viscous: c v; power: c sign(v) |v / v_top|^a (nonlinear damping); stribeck: a
+    #: friction force of the Stribeck law reaching the output through the tendon's compliance,
+    #: d(v) (c_C + c_S exp(-(|v| / v_S)^2)) with d(v) = tanh(v / v_eps) the sliding direction
+    #: (Coulomb level c_C and the static excess c_S fitted linearly, v_S on the grid): a
+    #: step at every reversal, larger where the slide is slow; relaxation: c times
     #: the speed through a first-order lag of time constant T (a Maxwell element's force).
     #: lag (reported as relaxation): the follower's motion itself relaxes, c (LP_T(M) - M)
     #: with M the model's motion (c = 1: a first-order lag of time constant T of the output,
@@ -218,6 +234,7 @@ class RateDependence(Effect):
     #: Gamma base), where the shifted input above follows the speed's sign at once.
     forms: ClassVar[dict[str, tuple[str, int, bool]]] = {
         "viscous": ("output", 1, False), "power": ("output", 1, False),
+        "stribeck": ("output", 2, False),
         "relaxation": ("output", 1, False), "lag": ("output", 1, True),
         "slip": ("input", 0, False)}
     labels: ClassVar[dict[str, str]] = {"lag": "relaxation", "slip": "speed_friction"}
@@ -233,7 +250,8 @@ class RateDependence(Effect):
                for c in (0.003, 0.01, 0.025, 0.05, 0.1)] + self.form_grid(ident)
 
     def form_grid(self, ident: RunData) -> list[Any]:
-        return [("viscous", 0.0), ("power", 0.5), ("power", 2.0), ("relaxation", 0.3),
+        return [("viscous", 0.0), ("power", 0.5), ("power", 2.0),
+                *[("stribeck", f) for f in STRIBECK_SPEEDS], ("relaxation", 0.3),
                 ("relaxation", 1.0), ("relaxation", 3.0), ("lag", 0.1), ("lag", 0.3),
                 ("lag", 1.0)]
 
@@ -252,6 +270,9 @@ class RateDependence(Effect):
         if form == "lag":
             return np.asarray((lowpass(y_base, p, run.dt) - y_base)[:, None], dtype=np.float64)
         v = run.v / ctx["v_top"]
+        if form == "stribeck":
+            slide = np.tanh(v / STRIBECK_EPS)
+            return np.column_stack([slide, slide * np.exp(-(np.abs(v) / p) ** 2)])
         if form == "viscous":
             x = v
         elif form == "power":

@@ -14,7 +14,8 @@ injected, coded here from its physical description and not from the candidate's 
   static band around the rest position;
 * ``rate_dependence``: lost motion that grows with the sliding speed (a backlash whose width
   follows ``|v|``); ``:viscous``, ``:power`` (``|v|^0.5``), ``:relaxation`` (a Maxwell
-  element): a force with the carriage's speed lowers the reading;
+  element): a force with the carriage's speed lowers the reading; ``:stribeck``: a friction
+  force of the Stribeck law (static excess fading exponentially with the speed) does;
 * ``tendon_elongation``: the tendon stretches as ``k T^2`` before the plant sees the motion;
   ``:linear_input``: as ``k T``; ``:linear_output``,
   ``:square_output``: with the output tension (the follower's return spring, not recorded);
@@ -144,6 +145,12 @@ FRICTION_SPEED_MM_S = 4.7
 TENSION_TOP_N = 7.4
 #: Time constant of the first-order relaxation form (s): a Maxwell element's viscous force.
 RELAXATION_S = 1.0
+#: The Stribeck form's friction law: the Coulomb level's share of the static friction, the
+#: speed over which the static excess fades (exponentially, the law's exponent 1; mm/s) and
+#: the speed below which the contact sticks (the sign's smooth turn; mm/s).
+STRIBECK_COULOMB_SHARE = 0.3
+STRIBECK_SPEED_MM_S = 0.8
+STRIBECK_STICK_MM_S = 0.1
 #: The follower's return spring, which sets the output tension of the output-side stretch.
 OUTPUT_PRELOAD_N = 4.0
 OUTPUT_SPRING_N_MM = 0.5
@@ -159,6 +166,7 @@ SIZES: dict[str, float] = {
     "rate_dependence:viscous": 0.06,        # mm per (mm/s) of input speed
     "rate_dependence:power": 0.25,          # mm at the identification sine's top speed
     "rate_dependence:relaxation": 0.08,     # mm per (mm/s), relaxing with RELAXATION_S
+    "rate_dependence:stribeck": 0.12,       # mm, the friction's offset at the slowest slide
     "tendon_elongation": 0.5,               # mm of stretch at the largest tension (T^2, input)
     "tendon_elongation:linear_input": 0.5,  # mm at the largest tension, T_in, input travel
     "tendon_elongation:linear_output": 0.4,  # mm at T_out = TENSION_TOP_N, T_out, on the reading
@@ -325,6 +333,10 @@ def _reading(y: FloatArray, uf: FloatArray, tf: FloatArray, tension: FloatArray,
     vt = 2 * np.pi * 0.25 * AMPLITUDES_MM[0]  # the identification sine's top speed
     y = y - size("rate_dependence:viscous") * speed_in
     y = y - size("rate_dependence:power") * np.sign(speed_in) * np.abs(speed_in / vt) ** 0.5
+    if size("rate_dependence:stribeck"):
+        law = STRIBECK_COULOMB_SHARE + (1.0 - STRIBECK_COULOMB_SHARE) \
+            * np.exp(-np.abs(speed_in) / STRIBECK_SPEED_MM_S)
+        y = y - size("rate_dependence:stribeck") * np.tanh(speed_in / STRIBECK_STICK_MM_S) * law
     if size("rate_dependence:relaxation"):
         dt = float(tf[1] - tf[0])
         y = y - size("rate_dependence:relaxation") * _lowpass(speed_in, RELAXATION_S, dt)

@@ -30,6 +30,7 @@ def test_a_plant_that_starts_loaded_is_clean(plant: str, base: str) -> None:
 @pytest.mark.parametrize(("hidden", "named"), [
     ("rate_dependence:viscous", ("rate_dependence", "viscous")),
     ("rate_dependence:power", ("rate_dependence", "power")),
+    ("rate_dependence:stribeck", ("rate_dependence", "stribeck")),
     ("asymmetry:pull_push_gain", ("asymmetry", "pull_push_gain")),
     ("time_delay:long", ("time_delay", "latency")),
 ])
@@ -60,6 +61,20 @@ def test_linear_creep_term_recovers_a_known_creep_exactly() -> None:
     # the exponential form cannot: its coefficient is not the creep's size
     e = ComposedModel(base_factory_for("gamma"), [Term(drift, 5.0, ctx)]).fit(replace(run, y=y))
     assert abs(float(e.coef_[0]) - 0.3) > 0.05
+
+
+def test_stribeck_term_recovers_a_known_friction_law() -> None:
+    # a Coulomb level and a static excess fading over v_S: the two coefficients are the law's
+    run = injected_runs("gamma")[0]
+    rate = CANDIDATES["rate_dependence"]
+    ctx = tuple(sorted(rate.context(run).items()))
+    v = run.v / dict(ctx)["v_top"]
+    slide = np.tanh(v / 0.02)
+    base = ComposedModel(base_factory_for("gamma")).fit(run)
+    y = base.predict(run) - slide * (0.03 + 0.08 * np.exp(-(np.abs(v) / 0.12) ** 2))
+    m = ComposedModel(base_factory_for("gamma"), [Term(rate, ("stribeck", 0.12), ctx)])
+    m.fit(replace(run, y=y))
+    assert m.coef_[-2:] == pytest.approx([-0.03, -0.08], rel=0.02)
 
 
 def test_a_one_way_backlash_is_answered_with_its_class_unless_the_load_cell_splits_it() -> None:
