@@ -166,7 +166,6 @@ SIZES: dict[str, float] = {
     "rate_dependence:viscous": 0.06,        # mm per (mm/s) of input speed
     "rate_dependence:power": 0.25,          # mm at the identification sine's top speed
     "rate_dependence:relaxation": 0.08,     # mm per (mm/s), relaxing with RELAXATION_S
-    "rate_dependence:stribeck": 0.12,       # mm, the friction's offset at the slowest slide
     "tendon_elongation": 0.5,               # mm of stretch at the largest tension (T^2, input)
     "tendon_elongation:linear_input": 0.5,  # mm at the largest tension, T_in, input travel
     "tendon_elongation:linear_output": 0.4,  # mm at T_out = TENSION_TOP_N, T_out, on the reading
@@ -179,6 +178,8 @@ SIZES: dict[str, float] = {
     "saturation": 0.12,                     # fraction of the output's range clipped softly
     "saturation:hard": 0.12,                # fraction of the output's range, a hard stop
     "saturation:cubic": 0.05,               # cubic softening: shortfall at the largest output
+    # (later forms last: a source's start and load-cell stream follow its place in the list)
+    "rate_dependence:stribeck": 0.12,       # mm, the friction's offset at the slowest slide
 }
 #: Every effect form of :data:`SIZES` (``effect:form``; the bare name is the first form).
 FORMS: tuple[str, ...] = tuple(SIZES)
