@@ -931,8 +931,9 @@ class ComposedModel:
         yb = run.y
         x = np.zeros(a.shape[1])
         coef: FloatArray | None = None  # no estimate before the first solve
+        fixed: dict[int, FloatArray] = {}
         for _ in range(self._rounds(base) if uses_base else 1):
-            phi = self._features(run, yb, coef)
+            phi = self._features(run, yb, coef, fixed=fixed)
             full = np.column_stack([a, phi])
             x, _ = solve_play_weights(full, run.y, n_weights=n_w,
                                       constraint=_weight_constraint(base))
@@ -955,11 +956,14 @@ class ComposedModel:
         return self.iterations * (FAST_ROUNDS if coupled and fast else 1)
 
     def _features(self, run: RunData, y_base: FloatArray,
-                  coef: FloatArray | None = None) -> FloatArray:
+                  coef: FloatArray | None = None, *,
+                  fixed: dict[int, FloatArray] | None = None) -> FloatArray:
         """The output terms' feature columns, in term order. A term that reads the base's
         prediction (a stop) reads the follower's motion: the base plus the contributions of
         the terms that act inside the mechanism (``before_stop``, weighted by ``coef``, the
-        current estimate of all coefficients; None: not known yet)."""
+        current estimate of all coefficients; None: not known yet). ``fixed``: the columns of
+        the terms that do not read the base, kept from an earlier call on the same run
+        (filled on the first; a backfitting step asks for them twice, every step)."""
         out = [t for t in self.terms if t.n_linear > 0]
         cols: dict[int, FloatArray] = {}
         motion = y_base
@@ -967,7 +971,12 @@ class ComposedModel:
         for i, t in enumerate(out):
             n = t.n_linear
             if not t.uses_base:
-                cols[i] = t.effect.features(run, t.theta, y_base, t.context)
+                if fixed is None:
+                    cols[i] = t.effect.features(run, t.theta, y_base, t.context)
+                else:
+                    if i not in fixed:
+                        fixed[i] = t.effect.features(run, t.theta, y_base, t.context)
+                    cols[i] = fixed[i]
                 if coef is not None and t.before_stop:
                     motion = motion + cols[i] @ coef[start:start + n]
             start += n
@@ -1047,8 +1056,10 @@ class ComposedModel:
                 coef[~mask] = _lstsq(phi[:, ~mask], r - phi[:, mask].sum(axis=1))
             return coef
 
+        fixed: dict[int, FloatArray] = {}
+
         def step(yb: FloatArray) -> tuple[FloatArray, float]:
-            phi = self._features(run, yb, st.known)
+            phi = self._features(run, yb, st.known, fixed=fixed)
             coef = coefficients(phi, y - yb)
             st.g = phi @ coef
             if refit:
@@ -1062,7 +1073,8 @@ class ComposedModel:
                 st.base.fit(u, y - st.g)
             out = np.asarray(st.base.predict(u), dtype=np.float64)
             st.known = coef
-            return out, float(np.sum((y - out - self._features(run, out, coef) @ coef) ** 2))
+            return out, float(np.sum((y - out - self._features(run, out, coef, fixed=fixed)
+                                      @ coef) ** 2))
 
         yb = np.asarray(base.predict(u), dtype=np.float64)
         if unit is not None:
@@ -1079,7 +1091,7 @@ class ComposedModel:
             st.base, yb = full, y_full
             if same:
                 break
-        phi = self._features(run, yb, st.known)
+        phi = self._features(run, yb, st.known, fixed=fixed)
         return st.base, _lstsq(phi, y - yb)
 
     def predict(self, run: RunData) -> FloatArray:
