@@ -1,7 +1,7 @@
 """``make bench``: run every ``bench/bench_*.py`` module and collect one JSON.
 
     python -m bench.run --out bench/results.json
-    python -m bench.run --only gamma,pipeline --out /tmp/partial.json
+    python -m bench.run --only gamma,pipeline --out bench/results-partial.json
 
 Each module exposes ``run() -> dict`` (JSON-able). Every module runs in its own Python process
 (one crashing, hanging or leaking module cannot take the others down, and none inherits

@@ -16,7 +16,7 @@
 Exit 0 only for ``lost 0`` with every service stopped.
 
     python -m pipelines.cluster_check                      # what make cluster-check runs
-    python -m pipelines.cluster_check --keep /tmp/cc       # keep logs and data there
+    python -m pipelines.cluster_check --keep ../cc         # keep logs and data there
 """
 
 from __future__ import annotations

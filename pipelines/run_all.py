@@ -2,7 +2,7 @@
 
     python -m pipelines.run_all
     python -m pipelines.run_all +experiment=quick
-    python -m pipelines.run_all paths.root=/tmp/cold-run          # everything in another folder
+    python -m pipelines.run_all paths.root=../cold-run            # everything in another folder
 
 Every stage runs in this process through its core (:mod:`pipelines.core`: ``generate``,
 ``ingest``, and the ``run`` of fit, validate, unseen_shape and report; never a stage's

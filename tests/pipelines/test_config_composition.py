@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -13,6 +14,9 @@ from omegaconf import OmegaConf
 from pipelines.common import CONF_DIR, Paths, to_container
 from pipelines.core import fit as fit_stage
 from pipelines.run_all import EXTERNAL_STAGES, OWN_STAGES, stage_config
+
+#: An absolute root elsewhere (composition only: nothing is written there).
+ELSEWHERE = Path(tempfile.gettempdir(), "somewhere")
 
 STAGES = ("fit", "validate", "report", "pipeline")
 
@@ -25,11 +29,11 @@ def _compose(name: str, overrides: list[str] | None = None, *, hydra_cfg: bool =
 
 @pytest.mark.parametrize("name", STAGES)
 def test_each_stage_composes_with_paths_and_tracking(name: str) -> None:
-    cfg = _compose(name, ["paths.root=/tmp/somewhere"])
+    cfg = _compose(name, [f"paths.root={ELSEWHERE}"])
     plain = to_container(cfg)
     paths = Paths.from_config(plain["paths"])
-    assert paths.processed == Path("/tmp/somewhere/data/processed/virtual")
-    assert paths.reports == Path("/tmp/somewhere/data/reports")
+    assert paths.processed == ELSEWHERE / "data/processed/virtual"
+    assert paths.reports == ELSEWHERE / "data/reports"
     assert plain["tracking"]["enabled"] is True and plain["tracking"]["uri"] is None
 
 
@@ -250,14 +254,14 @@ def test_compensation_experiments_compose_and_validate(experiment: str) -> None:
 
     from pipelines import schemas
 
-    cfg = _compose("compensate", [f"experiment={experiment}", "paths.root=/tmp/somewhere"])
+    cfg = _compose("compensate", [f"experiment={experiment}", f"paths.root={ELSEWHERE}"])
     # the composed config is the schema's node: merging it into the schema (struct) changes
     # nothing, and the typed settings of a plain copy come back equal to it
     typed = OmegaConf.merge(schemas.schema_node(schemas.CompensateConfig), cfg)
     assert OmegaConf.to_container(typed, resolve=True) == to_container(cfg)
     plain = to_container(cfg)
     assert dataclasses.asdict(schemas.settings(schemas.CompensateConfig, plain)) == plain
-    assert plain["out_dir"] == "/tmp/somewhere/data/reports/compensation"
+    assert plain["out_dir"] == str(ELSEWHERE / "data/reports/compensation")
     defaults = _schema_defaults("compensate")
     s1, s2, s0 = plain["seed001"], plain["seed002"], plain["seed000"]
     if experiment == "compensation_default":
@@ -324,7 +328,7 @@ def test_entry_point_config_validates_against_its_schema(name: str) -> None:
 
     schema = getattr(schemas, ENTRY_POINTS[name][0])
     assert schemas.STAGE_SCHEMAS[name] is schema
-    cfg = _compose(name, ["paths.root=/tmp/somewhere"])
+    cfg = _compose(name, [f"paths.root={ELSEWHERE}"])
     # the composed config is the schema's node: merging it into the schema (struct: an unknown
     # key would fail) changes nothing, and the typed settings of a plain copy come back equal
     typed = OmegaConf.merge(schemas.schema_node(schema), cfg)

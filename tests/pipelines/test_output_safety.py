@@ -34,7 +34,7 @@ def _raw_run(src: Path, name: str, *, seed: int = 1, **manifest: object) -> Path
     return folder
 
 
-@pytest.mark.parametrize("bad_id", ["../../escape", "/tmp/escape_abs", "sub/dir"])
+@pytest.mark.parametrize("bad_id", ["../../escape", "/escape_abs", "sub/dir"])
 def test_ingest_never_writes_a_run_id_outside_out(tmp_path: Path, bad_id: str) -> None:
     area = tmp_path / "area"
     src, out = area / "raw", area / "deep" / "out"
