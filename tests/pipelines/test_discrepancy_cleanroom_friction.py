@@ -14,7 +14,8 @@ from hydra import compose, initialize_config_dir
 
 from hysteresis.discrepancy.analysis import analyse
 from hysteresis.discrepancy.workflow import WorkflowSettings
-from pipelines.common import CONF_DIR, to_container
+from pipelines.common import CONF_DIR
+from pipelines.discrepancy import run
 from tests.cleanroom import HERE, load, stage_runs
 
 # a clean-room set through the stage: `make test-study` and CI, not `make test`
@@ -30,14 +31,13 @@ def _answer(runs: list[Any]) -> dict[str, Any]:
     return rep
 
 
-def _stage_answer(runs: list[Any]) -> dict[str, Any]:
-    """As ``make discrepancy`` answers with its defaults (the base chosen among the families)."""
+def _stage_answer(source: Path, tmp: Path) -> dict[str, Any]:
+    """What ``python -m pipelines.discrepancy source=<source>`` answers with its defaults (the
+    base chosen among the families)."""
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        cfg = to_container(compose("discrepancy"))
-    rep, _ = analyse(runs, auto_families=dict(cfg["auto_families"]),
-                     max_bases=int(cfg["max_bases"]),
-                     base_retry_factor=float(cfg["base_retry_factor"]))
-    return rep
+        cfg = compose("discrepancy", overrides=[f"source={source}",
+                                                f"report={tmp / 'report.json'}"])
+    return run(cfg).report
 
 
 @pytest.mark.slow
@@ -62,8 +62,8 @@ def test_lugre_friction_growing_with_speed_is_named_and_a_coulomb_drive_is_clean
     gen.write_source(tmp_path / "src", "viscous_strong")
     # the follower's speed law widens the loop: the Gamma base with speed-scaled plays cut
     # 21 % of it, the Bouc-Wen base the stage chooses with the term 76 %
-    rep = _stage_answer(stage_runs(tmp_path / "src" / "viscous_strong", tmp_path / "w1"))
+    rep = _stage_answer(tmp_path / "src" / "viscous_strong", tmp_path)
     assert rep["effects"][0]["name"] == "rate_dependence"
     assert rep["summary"]["heldout_reduction"] >= 0.5
     gen.write_source(tmp_path / "src", "clean")
-    assert _stage_answer(stage_runs(tmp_path / "src" / "clean", tmp_path / "w2"))["effects"] == []
+    assert _stage_answer(tmp_path / "src" / "clean", tmp_path)["effects"] == []
